@@ -1,0 +1,42 @@
+# pmsm_sysid — two-command set-up: `make demo`, `make test`.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+CLI := $(VENV)/bin/pmsm-sysid
+STAMP := $(VENV)/.installed
+DEMO_DIR ?= demo_out
+
+# Keep DDS discovery on this host.
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+export ROS_DOMAIN_ID ?= 42
+export PIP_DISABLE_PIP_VERSION_CHECK := 1
+
+.PHONY: venv demo test lint typecheck bags bench clean
+
+venv: $(STAMP)
+
+$(STAMP): requirements.lock setup.py setup.cfg package.xml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q -r requirements.lock
+	$(PY) -m pip install -q --no-deps --no-build-isolation -e .
+	touch $(STAMP)
+
+demo: $(STAMP)
+	ROS_LOG_DIR=$(CURDIR)/$(DEMO_DIR)/ros_log bash scripts/demo.sh $(DEMO_DIR)
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check pmsm_sysid test bench scripts
+	$(VENV)/bin/mypy pmsm_sysid
+
+test: $(STAMP) lint
+	ROS_LOG_DIR=$$(mktemp -d) $(PY) -m pytest -n 2 -q test
+
+bags: $(STAMP)
+	bash scripts/make_bags.sh
+
+bench: $(STAMP)
+	$(PY) bench/ofr_bench.py
+
+clean:
+	rm -rf $(VENV) $(DEMO_DIR) .pytest_cache .mypy_cache .ruff_cache *.egg-info

@@ -1,0 +1,68 @@
+"""``pmsm-sysid <verb>``: one entry point for every tool (contract §3).
+
+Each verb lives in its own module ``pmsm_sysid.cli.<verb>`` exposing ``HELP`` (one line),
+``add_arguments(parser)`` and ``run(args) -> int``. Verb modules import only the standard
+library at top level; heavy imports (numpy, rclpy, rosbags) happen inside ``run`` so that
+``--help`` is instant. Any :class:`~pmsm_sysid.core.errors.SysIdError` becomes one line on
+stderr and exit code 2; usage errors also exit 2 with one line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+from typing import NoReturn
+
+VERBS = (
+    "run", "simulate", "replay", "record", "monitor", "identify", "gfrf",
+    "diagnose", "report", "import-mat",
+)
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose usage errors are one line on stderr and exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def _module_name(verb: str) -> str:
+    return "pmsm_sysid.cli." + verb.replace("-", "_")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="pmsm-sysid", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=_Parser)
+    sub.required = True
+    for verb in VERBS:
+        try:
+            mod = importlib.import_module(_module_name(verb))
+        except ModuleNotFoundError:
+            continue  # verb not built yet in this checkout
+        p = sub.add_parser(verb, help=mod.HELP, description=mod.HELP)
+        mod.add_arguments(p)
+        p.set_defaults(_run=mod.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from ..core.errors import SysIdError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._run(args))
+    except SysIdError as exc:
+        print(f"pmsm-sysid {args.verb}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"pmsm-sysid {args.verb}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Numerical core: pure numpy/scipy. Never imports rclpy, rosbags or matplotlib."""

@@ -1,0 +1,39 @@
+"""Error types, one per area. The CLI turns any :class:`SysIdError` into one line and exit 2."""
+
+from __future__ import annotations
+
+
+class SysIdError(Exception):
+    """Base of every error the project raises on bad input or an impossible request."""
+
+
+class PlantError(SysIdError):
+    """A plant file or plant parameters are invalid."""
+
+
+class ExcitationError(SysIdError):
+    """An excitation signal cannot be generated as asked."""
+
+
+class DataError(SysIdError):
+    """Signals are unusable: NaN/Inf, gaps, wrong lengths, ranges outside the recording."""
+
+
+class InsufficientExcitationError(DataError):
+    """The data do not excite the system enough to identify the requested model."""
+
+
+class IdentificationError(SysIdError):
+    """Structure selection or estimation failed (e.g. rank-deficient candidate set)."""
+
+
+class GfrfError(SysIdError):
+    """A model cannot be mapped to GFRFs as asked (bad model, bad frequencies, grid too big)."""
+
+
+class DiagnoseError(SysIdError):
+    """The sim-to-real diagnosis cannot run on the given plant and recording."""
+
+
+class BagError(SysIdError):
+    """A recording cannot be read or written (missing, corrupt, unknown storage, wrong types)."""

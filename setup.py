@@ -1,0 +1,31 @@
+"""ament_python / pip package definition for pmsm_sysid."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "pmsm_sysid"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*", "bench"]),
+    package_data={PACKAGE: ["data/*.yaml", "py.typed"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
+        ("share/" + PACKAGE, ["package.xml"]),
+        ("share/" + PACKAGE + "/msg_schemas", glob("msg_schemas/*.msg")),
+    ],
+    python_requires=">=3.10",
+    install_requires=["numpy", "scipy", "rosbags>=0.10", "PyYAML"],
+    extras_require={
+        "report": ["matplotlib"],
+        "test": ["pytest", "pytest-xdist", "pytest-timeout", "hypothesis", "ruff", "mypy",
+                 "types-PyYAML", "scipy-stubs", "matplotlib"],
+        "bench": ["sysidentpy==0.9.0", "numpy<=2.3.5"],
+    },
+    zip_safe=True,
+    maintainer="pmsm_sysid maintainers",
+    description="Online NARX identification and GFRF analysis of a linear PMSM servo (ROS 2).",
+    license="Apache-2.0",
+    entry_points={"console_scripts": ["pmsm-sysid = pmsm_sysid.cli:main"]},
+)
