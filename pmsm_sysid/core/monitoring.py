@@ -1,0 +1,229 @@
+"""Bookkeeping behind ``pmsm-sysid monitor``: rates, gaps and the latest results, no ROS.
+
+A :class:`TopicStats` is fed ``(receive_time_s, stamp_ns, value)`` per message:
+
+- ``rate_hz``: messages per second of receive time over the last ``window_s`` seconds,
+  ``(n - 1) / (t_last - t_first)`` over the receive times in the window;
+- ``stamp_rate_hz``: 1 / median of the recent header-stamp steps (the publisher's sample
+  rate, which differs from ``rate_hz`` when a recording is replayed faster than real time);
+- a *gap* is a stamp step larger than 1.5 nominal periods, the nominal period being the median
+  of the preceding steps (or ``expected_period_s`` when given); ``missing`` adds up
+  ``round(step / period) - 1`` over the gaps; ``backwards`` counts non-increasing stamps.
+
+:class:`SysIdView` keeps the latest model / ridges / validation / change events published by
+the identification side (plain dicts and JSON text, converted from the messages by the node).
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+GAP_FACTOR = 1.5
+_STEP_HISTORY = 64
+
+
+@dataclass
+class TopicStats:
+    """Running statistics of one topic."""
+
+    topic: str
+    msgtype: str = ""
+    window_s: float = 2.0
+    expected_period_s: float | None = None
+    count: int = 0
+    gaps: int = 0
+    missing: int = 0
+    backwards: int = 0
+    last_value: Any = None
+    last_stamp_ns: int | None = None
+    last_receive_s: float | None = None
+    _recv: deque[float] = field(default_factory=deque, repr=False)
+    _steps: deque[int] = field(default_factory=lambda: deque(maxlen=_STEP_HISTORY), repr=False)
+
+    def feed(self, receive_s: float, stamp_ns: int | None = None, value: Any = None) -> None:
+        """Account for one message received at ``receive_s`` carrying ``stamp_ns``."""
+        self.count += 1
+        self.last_value = value
+        self.last_receive_s = receive_s
+        self._recv.append(receive_s)
+        while self._recv and self._recv[0] < receive_s - self.window_s:
+            self._recv.popleft()
+        if stamp_ns is None:
+            return
+        if self.last_stamp_ns is not None:
+            self._account_step(stamp_ns - self.last_stamp_ns)
+        self.last_stamp_ns = stamp_ns
+
+    def _account_step(self, step_ns: int) -> None:
+        if step_ns <= 0:
+            self.backwards += 1
+            return
+        period = self.nominal_period_ns()
+        if period is not None and step_ns > GAP_FACTOR * period:
+            self.gaps += 1
+            self.missing += max(round(step_ns / period) - 1, 0)
+            return  # a gap is not a sample of the nominal period
+        self._steps.append(step_ns)
+
+    def nominal_period_ns(self) -> float | None:
+        """The expected stamp step: ``expected_period_s`` or the median of recent steps."""
+        if self.expected_period_s is not None:
+            return self.expected_period_s * 1e9
+        if len(self._steps) < 3:
+            return None
+        return float(statistics.median(self._steps))
+
+    def rate_hz(self, now_s: float | None = None) -> float:
+        """Receive rate over the window ending at ``now_s`` (default: the last message)."""
+        if now_s is not None:
+            while self._recv and self._recv[0] < now_s - self.window_s:
+                self._recv.popleft()
+        if len(self._recv) < 2:
+            return 0.0
+        span = self._recv[-1] - self._recv[0]
+        return (len(self._recv) - 1) / span if span > 0 else 0.0
+
+    def stamp_rate_hz(self) -> float | None:
+        """1 / nominal stamp period, or None before three regular steps were seen."""
+        if len(self._steps) < 3:
+            return None
+        return 1e9 / float(statistics.median(self._steps))
+
+    def snapshot(self, now_s: float | None = None) -> dict[str, Any]:
+        """JSON-ready view of the statistics."""
+        age = None
+        if now_s is not None and self.last_receive_s is not None:
+            age = max(now_s - self.last_receive_s, 0.0)
+        return {
+            "topic": self.topic, "type": self.msgtype, "count": self.count,
+            "rate_hz": self.rate_hz(now_s), "stamp_rate_hz": self.stamp_rate_hz(),
+            "last_value": self.last_value,
+            "last_stamp_s": None if self.last_stamp_ns is None else self.last_stamp_ns / 1e9,
+            "age_s": age, "gaps": self.gaps, "missing": self.missing,
+            "backwards": self.backwards,
+        }
+
+
+def _parse_json(text: str) -> dict[str, Any] | None:
+    try:
+        obj = json.loads(text)
+    except ValueError:
+        return None
+    return obj if isinstance(obj, dict) else None
+
+
+@dataclass
+class SysIdView:
+    """Latest results of the identification side; each stays None until one arrives."""
+
+    max_events: int = 10
+    model: dict[str, Any] | None = None
+    ridges: dict[str, Any] | None = None
+    ridge_frequencies: list[float] | None = None
+    validation: list[dict[str, Any]] | None = None
+    changes: list[dict[str, Any]] = field(default_factory=list)
+
+    def on_model(self, text: str) -> None:
+        """A model message (identify JSON): keep terms, output, sample rate, fit."""
+        obj = _parse_json(text)
+        if obj is None:
+            self.model = {"error": "not JSON"}
+            return
+        terms = [
+            {"name": str(t.get("name", "?")), "estimate": t.get("estimate")}
+            for t in obj.get("terms", []) if isinstance(t, dict)
+        ]
+        val = obj.get("validation", {})
+        fit = val.get("validation", {}) if isinstance(val, dict) else {}
+        self.model = {"output": obj.get("output"), "n_terms": len(terms), "terms": terms,
+                      "validation": fit if isinstance(fit, dict) else {}}
+
+    def on_ridges(self, text: str) -> None:
+        """A ridges message (gfrf JSON): keep the H1 peaks and H2/H3 ridge frequencies."""
+        obj = _parse_json(text)
+        if obj is None:
+            self.ridges = {"error": "not JSON"}
+            return
+        out: dict[str, Any] = {"stable": obj.get("stable")}
+        for key, inner in (("h1", "peaks"), ("h2", "ridges"), ("h3", "ridges")):
+            block = obj.get(key, {})
+            items = block.get(inner, []) if isinstance(block, dict) else []
+            out[key] = [i.get("freq_hz") for i in items if isinstance(i, dict)]
+        self.ridges = out
+
+    def on_ridge_frequencies(self, values: list[float]) -> None:
+        self.ridge_frequencies = [float(v) for v in values]
+
+    def on_validation(self, statuses: list[dict[str, Any]]) -> None:
+        """A validation DiagnosticArray as dicts (name, level, message, values)."""
+        self.validation = [dict(s, passed=int(s.get("level", 0)) == 0) for s in statuses]
+
+    def on_change(self, stamp_s: float | None, statuses: list[dict[str, Any]]) -> None:
+        """A change DiagnosticArray: append one event per status, keep the latest few."""
+        for s in statuses:
+            self.changes.append(dict(s, stamp_s=stamp_s))
+        del self.changes[:-self.max_events]
+
+    def snapshot(self) -> dict[str, Any]:
+        return {"model": self.model, "ridges": self.ridges,
+                "ridge_frequencies": self.ridge_frequencies,
+                "validation": self.validation, "changes": list(self.changes)}
+
+
+def _fmt(value: Any) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def render_topics(topics: list[dict[str, Any]]) -> list[str]:
+    """Table lines for the topic snapshots."""
+    lines = [f"{'topic':<34} {'count':>8} {'rate Hz':>9} {'stamp Hz':>9} {'gaps':>5} "
+             f"{'miss':>6} {'age s':>6}  last"]
+    for s in topics:
+        stamp_rate = "-" if s["stamp_rate_hz"] is None else f"{s['stamp_rate_hz']:.1f}"
+        age = "-" if s["age_s"] is None else f"{s['age_s']:.1f}"
+        lines.append(
+            f"{s['topic']:<34} {s['count']:>8d} {s['rate_hz']:>9.1f} {stamp_rate:>9} "
+            f"{s['gaps']:>5d} {s['missing']:>6d} {age:>6}  {_fmt(s['last_value'])}")
+    return lines
+
+
+def render_sysid(view: dict[str, Any]) -> list[str]:
+    """Lines for the latest model, ridges, validation and change events."""
+    model = view["model"]
+    if model is None:
+        lines = ["model: (none yet)"]
+    elif "error" in model:
+        lines = [f"model: {model['error']}"]
+    else:
+        terms = ", ".join(f"{t['name']}={_fmt(t['estimate'])}" for t in model["terms"][:8])
+        more = " ..." if model["n_terms"] > 8 else ""
+        lines = [f"model ({model['output']}, {model['n_terms']} terms): {terms}{more}"]
+    ridges = view["ridges"]
+    if ridges is None and view["ridge_frequencies"] is None:
+        lines.append("ridges: (none yet)")
+    elif ridges is not None and "error" not in ridges:
+        lines.append(f"ridges: H1 peaks {ridges['h1']} Hz, H2 {ridges['h2']} Hz, "
+                     f"H3 {ridges['h3']} Hz")
+    if view["ridge_frequencies"] is not None:
+        lines.append(f"ridge frequencies: {view['ridge_frequencies']}")
+    validation = view["validation"]
+    if validation is None:
+        lines.append("validation: (none yet)")
+    else:
+        for s in validation:
+            verdict = "PASS" if s["passed"] else "FAIL"
+            lines.append(f"validation {s.get('name', '')}: {verdict} {s.get('message', '')}")
+    if not view["changes"]:
+        lines.append("changes: (none)")
+    for c in view["changes"][-3:]:
+        lines.append(f"change @ {_fmt(c.get('stamp_s'))} s: {c.get('name', '')} "
+                     f"{c.get('message', '')}")
+    return lines

@@ -1,0 +1,206 @@
+"""Small rclpy helpers shared by the nodes and the ROS verbs.
+
+- :func:`ros_session`: a private rclpy Context (on ``ROS_DOMAIN_ID`` from the environment
+  unless given) with one ``SingleThreadedExecutor``; on exit it shuts down in the safe order
+  (executor, nodes, context).
+- :func:`stop_on_signals`: SIGINT/SIGTERM set a stop event instead of raising, so a verb can
+  leave its spin loop and finalise its output (a bag, a JSON file) cleanly.
+- Stamp and message helpers: nanoseconds <-> ``builtin_interfaces/Time``, the contract's three
+  stamped messages <-> floats, message classes from rosbag2 type names.
+- :func:`data_qos`: the QoS of the data topics (reliable, keep-last 1000).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from types import FrameType
+from typing import Any, TypeVar
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import try_shutdown
+
+from .core.errors import BagError, SysIdError
+from .topics import INPUT_TYPES, POSITION, SPEED, THRUST
+
+NS_PER_S = 1_000_000_000
+N = TypeVar("N", bound=Node)
+DATA_DEPTH = 1000
+
+
+def data_qos(depth: int = DATA_DEPTH) -> QoSProfile:
+    """QoS of the data topics: reliable, volatile, keep-last ``depth`` (default 1000).
+
+    1000 samples = 2 s at 500 Hz of slack for a slow subscriber before the oldest sample is
+    overwritten; a keep-last reliable publisher is compatible with any reliable or
+    best-effort subscriber.
+    """
+    return QoSProfile(  # type: ignore[no-untyped-call]
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.VOLATILE,
+    )
+
+
+def env_domain_id() -> int | None:
+    """``ROS_DOMAIN_ID`` from the environment, or None (rcl's default 0) when unset."""
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if not text:
+        return None
+    try:
+        value = int(text)
+    except ValueError as exc:
+        raise SysIdError(f"ROS_DOMAIN_ID must be an integer, got '{text}'") from exc
+    if not 0 <= value <= 232:
+        raise SysIdError(f"ROS_DOMAIN_ID must be in 0..232, got {value}")
+    return value
+
+
+@dataclass
+class RosSession:
+    """A private Context with its executor; nodes added here are destroyed on exit."""
+
+    context: Context
+    executor: SingleThreadedExecutor
+    nodes: list[Node] = field(default_factory=list)
+    stop: threading.Event = field(default_factory=threading.Event)
+
+    def add(self, node: N) -> N:
+        """Add ``node`` to the executor (and destroy it when the session ends)."""
+        self.nodes.append(node)
+        self.executor.add_node(node)
+        return node
+
+    def spin_until(self, done: Callable[[], bool], timeout_s: float | None = None,
+                   step_s: float = 0.05) -> bool:
+        """Spin until ``done()`` or the stop event or ``timeout_s``; True if ``done()``."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while not done():
+            if self.stop.is_set() or not self.context.ok():
+                return False
+            if deadline is not None and time.monotonic() >= deadline:
+                return False
+            self.executor.spin_once(timeout_sec=step_s)
+        return True
+
+    def spin_for(self, seconds: float | None, step_s: float = 0.05) -> None:
+        """Spin for ``seconds`` (None = until the stop event is set, e.g. by a signal)."""
+        self.spin_until(lambda: False, seconds, step_s)
+
+
+@contextmanager
+def ros_session(domain_id: int | None = None) -> Iterator[RosSession]:
+    """Private rclpy Context + SingleThreadedExecutor, shut down in the safe order.
+
+    ``domain_id`` defaults to ``ROS_DOMAIN_ID`` from the environment. No rclpy signal
+    handlers are installed (combine with :func:`stop_on_signals` in a verb).
+    """
+    domain = env_domain_id() if domain_id is None else domain_id
+    ctx = Context()
+    try:
+        rclpy.init(context=ctx, domain_id=domain)
+    except Exception as exc:  # rclpy raises RCLError subclasses of RuntimeError
+        raise SysIdError(f"cannot initialise ROS 2 (domain {domain}): {exc}") from exc
+    executor = SingleThreadedExecutor(context=ctx)
+    session = RosSession(ctx, executor)
+    try:
+        yield session
+    finally:
+        executor.shutdown(timeout_sec=2.0)
+        for node in session.nodes:
+            node.destroy_node()  # type: ignore[no-untyped-call]
+        try_shutdown(context=ctx)
+
+
+@contextmanager
+def stop_on_signals(stop: threading.Event) -> Iterator[threading.Event]:
+    """While active, SIGINT and SIGTERM set ``stop`` instead of killing the process.
+
+    A second SIGINT while stopping raises KeyboardInterrupt (the user insists). Outside the
+    main thread signals cannot be caught; the event is then only set by the caller.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        if stop.is_set() and signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        stop.set()
+
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+# --- stamps -----------------------------------------------------------------------------
+
+def seconds_to_ns(t: float) -> int:
+    """Seconds (float) to integer nanoseconds, rounded to nearest."""
+    return round(t * NS_PER_S)
+
+
+def stamp_from_ns(ns: int) -> Any:
+    """``builtin_interfaces/Time`` for ``ns`` nanoseconds (non-negative)."""
+    from builtin_interfaces.msg import Time
+
+    sec, nanosec = divmod(int(ns), NS_PER_S)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def stamp_to_ns(stamp: Any) -> int:
+    """Integer nanoseconds of a ``builtin_interfaces/Time``."""
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+# --- the contract's three messages ------------------------------------------------------
+
+def message_class(type_name: str) -> Any:
+    """Python class of a rosbag2 type name like ``geometry_msgs/msg/WrenchStamped``."""
+    parts = type_name.split("/")
+    if len(parts) != 3 or not all(parts):
+        raise BagError(f"not a ROS 2 message type name: '{type_name}'")
+    pkg, kind, name = parts
+    try:
+        return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+    except (ImportError, AttributeError) as exc:
+        raise BagError(f"message type '{type_name}' is not available in this installation") from exc
+
+
+def make_sample_messages(stamp_ns: int, thrust: float, speed: float, position: float,
+                         frame_id: str = "") -> dict[str, Any]:
+    """The three messages of one sample (contract §1), sharing one header stamp."""
+    msgs = {sig: message_class(t)() for sig, t in INPUT_TYPES.items()}
+    stamp = stamp_from_ns(stamp_ns)
+    for msg in msgs.values():
+        msg.header.stamp = stamp
+        msg.header.frame_id = frame_id
+    msgs[THRUST].wrench.force.x = float(thrust)
+    msgs[SPEED].twist.linear.x = float(speed)
+    msgs[POSITION].point.x = float(position)
+    return msgs
+
+
+def sample_value(signal_name: str, msg: Any) -> float:
+    """The contract field of one input message: force.x, linear.x or point.x."""
+    if signal_name == THRUST:
+        return float(msg.wrench.force.x)
+    if signal_name == SPEED:
+        return float(msg.twist.linear.x)
+    if signal_name == POSITION:
+        return float(msg.point.x)
+    raise SysIdError(f"unknown signal '{signal_name}' (expected thrust, speed or position)")
