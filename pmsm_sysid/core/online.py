@@ -1,0 +1,459 @@
+"""Streaming building blocks of online identification (pure Python + numpy, thread-safe).
+
+The data path of the identifier node, kept free of ROS so it can be tested on plain arrays:
+
+1. :class:`StampAligner` — one sample is the three messages (thrust, speed, position) that
+   carry the same ``header.stamp`` within a tolerance (contract §1; default half a sample
+   period, the period read from the stamps). Samples leave in stamp order with an absolute
+   sample index; messages that never complete a sample are counted as *unaligned*, late
+   messages as *out of order*, repeated ones as *duplicates*, missing stamps as *gaps*.
+2. :class:`WindowScheduler` — a fixed-size ring of the latest aligned samples; every ``hop``
+   samples (on the absolute index grid, so two processes watching the same stamps cut the
+   same windows) it copies out the latest ``window`` contiguous samples as a :class:`Window`.
+3. :class:`LatestQueue` — bounded, latest-wins hand-over from the subscription path to the
+   fitting thread: when fits cannot keep up the oldest waiting window is skipped and counted.
+4. :class:`FitWorker` — the thread that takes windows off the queue and runs the fits, so the
+   subscription path never waits for a fit.
+
+Memory is bounded everywhere: ring, pending table, queue and result list have fixed sizes.
+"""
+
+from __future__ import annotations
+
+import bisect
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Generic, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import DataError
+from .signals import Recording
+
+SIGNALS = ("thrust", "speed", "position")
+NS_PER_S = 1_000_000_000
+FloatArray = NDArray[np.float64]
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """One aligned sample: absolute index on the stamp grid, stamp (ns), one value per signal."""
+
+    index: int
+    stamp_ns: int
+    values: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class AlignStats:
+    """Counters of the aligner (message counts unless named ``samples``/``gaps``)."""
+
+    messages: int
+    samples: int
+    unaligned: int
+    out_of_order: int
+    duplicates: int
+    gaps: int
+    samples_missing: int
+
+
+class _Entry:
+    __slots__ = ("count", "stamp", "values")
+
+    def __init__(self, stamp: int, n: int) -> None:
+        self.stamp = stamp
+        self.values: list[float | None] = [None] * n
+        self.count = 0
+
+
+class StampAligner:
+    """Joins per-signal messages into samples by stamp (contract §1), in stamp order.
+
+    ``tolerance_ns`` None = half the sample period once the period is known (exact match
+    before). ``period_ns`` None = read from the stamps: the median step of the first signal
+    that shows ``warmup`` increasing stamps; samples are held until then. An incomplete entry
+    is given up (its messages counted unaligned) once ``reorder`` newer entries wait behind it.
+    """
+
+    def __init__(
+        self,
+        signals: Sequence[str] = SIGNALS,
+        tolerance_ns: int | None = None,
+        period_ns: int | None = None,
+        reorder: int = 16,
+        warmup: int = 4,
+    ) -> None:
+        if not signals or len(set(signals)) != len(signals):
+            raise DataError(f"aligner needs distinct signal names, got {list(signals)}")
+        if period_ns is not None and period_ns <= 0:
+            raise DataError(f"sample period must be positive, got {period_ns} ns")
+        if reorder < 1 or warmup < 1:
+            raise DataError("aligner: reorder and warmup must be >= 1")
+        self.signals = tuple(signals)
+        self._slot = {s: i for i, s in enumerate(self.signals)}
+        self._tol_fixed = tolerance_ns
+        self.period_ns = period_ns
+        self._reorder = reorder
+        self._warmup = warmup
+        self._max_pending = 4 * reorder + warmup
+        self._steps: dict[str, list[int]] = {s: [] for s in self.signals}
+        self._last_seen: dict[str, int] = {}
+        self._pending: list[_Entry] = []
+        self._keys: list[int] = []
+        self._last_stamp: int | None = None
+        self._last_index: int | None = None
+        self._n = dict.fromkeys(
+            ("messages", "samples", "unaligned", "out_of_order", "duplicates", "gaps",
+             "samples_missing"), 0)
+
+    # -- public ------------------------------------------------------------------------
+    @property
+    def tolerance_ns(self) -> int:
+        if self._tol_fixed is not None:
+            return self._tol_fixed
+        return self.period_ns // 2 if self.period_ns else 0
+
+    @property
+    def stats(self) -> AlignStats:
+        return AlignStats(**self._n)
+
+    def push(self, signal: str, stamp_ns: int, value: float) -> list[Sample]:
+        """Add one message; return the samples this completes (possibly several, in order)."""
+        slot = self._slot.get(signal)
+        if slot is None:
+            raise DataError(f"unknown signal '{signal}' (expected one of {self.signals})")
+        self._n["messages"] += 1
+        self._learn_period(signal, stamp_ns)
+        if self._is_late(stamp_ns):
+            return []
+        entry = self._find_or_add(stamp_ns)
+        if entry.values[slot] is not None:
+            self._n["duplicates"] += 1
+        else:
+            entry.values[slot] = float(value)
+            entry.count += 1
+        return self._emit()
+
+    def push_sample(self, stamp_ns: int, values: Sequence[float]) -> list[Sample]:
+        """Add an already aligned sample (e.g. one JointState message holding all signals)."""
+        if len(values) != len(self.signals):
+            raise DataError(f"sample has {len(values)} values, expected {len(self.signals)}")
+        self._n["messages"] += len(values)
+        for s in self.signals:
+            self._learn_period(s, stamp_ns)
+        if self._is_late(stamp_ns, len(values)):
+            return []
+        entry = self._find_or_add(stamp_ns)
+        if entry.count:
+            self._n["duplicates"] += len(values)
+            return self._emit()
+        entry.values = [float(v) for v in values]
+        entry.count = len(values)
+        return self._emit()
+
+    def flush(self) -> list[Sample]:
+        """Emit what is complete and give up on the rest (end of stream)."""
+        out: list[Sample] = []
+        if self.period_ns is None and self._pending:
+            self.period_ns = self._guess_period()
+        while self._pending:
+            out.extend(self._emit())
+            if self._pending:
+                self._drop_front()
+        return out
+
+    # -- internals ---------------------------------------------------------------------
+    def _learn_period(self, signal: str, stamp: int) -> None:
+        if self.period_ns is not None:
+            return
+        last = self._last_seen.get(signal)
+        self._last_seen[signal] = stamp
+        if last is not None and stamp > last:
+            steps = self._steps[signal]
+            steps.append(stamp - last)
+            if len(steps) >= self._warmup:
+                self.period_ns = int(np.median(steps))
+                self._remerge()
+
+    def _remerge(self) -> None:
+        """Re-join the entries held while the tolerance was still 0 (jittered stamps)."""
+        held = [(e.stamp, i, v) for e in self._pending for i, v in enumerate(e.values)
+                if v is not None]
+        self._pending, self._keys = [], []
+        for stamp, slot, value in held:
+            entry = self._find_or_add(stamp)
+            if entry.values[slot] is None:
+                entry.values[slot] = value
+                entry.count += 1
+            else:
+                self._n["duplicates"] += 1
+
+    def _guess_period(self) -> int | None:
+        steps = [s for v in self._steps.values() for s in v]
+        return int(np.median(steps)) if steps else None
+
+    def _is_late(self, stamp: int, n_msgs: int = 1) -> bool:
+        if self._last_stamp is None or stamp > self._last_stamp + self.tolerance_ns:
+            return False
+        key = "duplicates" if abs(stamp - self._last_stamp) <= self.tolerance_ns else "out_of_order"
+        self._n[key] += n_msgs
+        return True
+
+    def _find_or_add(self, stamp: int) -> _Entry:
+        tol = self.tolerance_ns
+        i = bisect.bisect_left(self._keys, stamp - tol)
+        best: _Entry | None = None
+        while i < len(self._keys) and self._keys[i] <= stamp + tol:
+            cand = self._pending[i]
+            if best is None or abs(cand.stamp - stamp) < abs(best.stamp - stamp):
+                best = cand
+            i += 1
+        if best is not None:
+            return best
+        entry = _Entry(stamp, len(self.signals))
+        j = bisect.bisect_right(self._keys, stamp)
+        self._keys.insert(j, stamp)
+        self._pending.insert(j, entry)
+        return entry
+
+    def _drop_front(self) -> None:
+        entry = self._pending.pop(0)
+        self._keys.pop(0)
+        self._n["unaligned"] += entry.count
+
+    def _emit(self) -> list[Sample]:
+        out: list[Sample] = []
+        n = len(self.signals)
+        while self._pending:
+            front = self._pending[0]
+            if front.count < n or self.period_ns is None:
+                if len(self._pending) > (self._reorder if front.count < n else self._max_pending):
+                    self._drop_front()
+                    continue
+                break
+            self._pending.pop(0)
+            self._keys.pop(0)
+            out.append(self._index(front))
+        return out
+
+    def _index(self, entry: _Entry) -> Sample:
+        period = self.period_ns
+        assert period is not None
+        if self._last_index is None or self._last_stamp is None:
+            index = (entry.stamp + period // 2) // period
+        else:
+            step = max(1, (entry.stamp - self._last_stamp + period // 2) // period)
+            if step > 1:
+                self._n["gaps"] += 1
+                self._n["samples_missing"] += step - 1
+            index = self._last_index + step
+        self._last_index, self._last_stamp = index, entry.stamp
+        self._n["samples"] += 1
+        return Sample(index, entry.stamp, tuple(v if v is not None else float("nan")
+                                                for v in entry.values))
+
+
+@dataclass(frozen=True)
+class Window:
+    """``n`` contiguous samples ending at absolute index ``stop_index - 1``.
+
+    ``history`` extra samples before ``start_index`` are included at the front of the arrays
+    (the lagged regressors of the first rows; ``data`` slices them off).
+    """
+
+    seq: int
+    start_index: int
+    stop_index: int
+    history: int
+    stamps_ns: NDArray[np.int64]
+    values: FloatArray
+    signals: tuple[str, ...] = SIGNALS
+    due_monotonic: float = field(default=0.0, compare=False)
+
+    @property
+    def start_stamp(self) -> float:
+        return float(self.stamps_ns[self.history]) / NS_PER_S
+
+    @property
+    def end_stamp(self) -> float:
+        return float(self.stamps_ns[-1]) / NS_PER_S
+
+    def signal(self, name: str, with_history: bool = False) -> FloatArray:
+        col = self.values[:, self.signals.index(name)]
+        return col if with_history else col[self.history:]
+
+    def recording(self, sample_rate_hz: float, with_history: bool = True) -> Recording:
+        """The window as a :class:`Recording` (history included unless asked otherwise)."""
+        h = 0 if with_history else self.history
+        t = self.stamps_ns[h:].astype(np.float64) / NS_PER_S
+        cols = {s: np.ascontiguousarray(self.values[h:, i]) for i, s in enumerate(self.signals)}
+        return Recording(t=t, thrust=cols["thrust"], speed=cols["speed"],
+                         position=cols["position"], sample_rate_hz=sample_rate_hz,
+                         source=f"window {self.seq}")
+
+
+class WindowScheduler:
+    """Ring of the latest samples; cuts a window whenever ``(index + 1) % hop == 0``.
+
+    A window needs ``window + history`` contiguous samples (a gap restarts the count), so a
+    window never spans missing data. ``capacity`` is exactly that: memory does not grow.
+    """
+
+    def __init__(self, window: int = 1000, hop: int = 250, history: int = 0,
+                 n_signals: int = len(SIGNALS), signals: Sequence[str] = SIGNALS) -> None:
+        if window < 2 or hop < 1 or history < 0:
+            raise DataError(f"need window >= 2, hop >= 1, history >= 0 (got {window}, {hop}, "
+                            f"{history})")
+        self.window, self.hop, self.history = window, hop, history
+        self.signals = tuple(signals)
+        self.capacity = window + history
+        self._stamps = np.zeros(self.capacity, dtype=np.int64)
+        self._values = np.zeros((self.capacity, n_signals), dtype=np.float64)
+        self._head = 0  # next write position
+        self._run = 0  # contiguous samples ending at the newest one
+        self._last_index: int | None = None
+        self.samples = 0
+        self.windows = 0
+
+    def push(self, sample: Sample) -> Window | None:
+        """Store ``sample``; return the window it completes, if any."""
+        contiguous = self._last_index is not None and sample.index == self._last_index + 1
+        self._run = self._run + 1 if contiguous else 1
+        self._last_index = sample.index
+        self._stamps[self._head] = sample.stamp_ns
+        self._values[self._head] = sample.values
+        self._head = (self._head + 1) % self.capacity
+        self.samples += 1
+        if (sample.index + 1) % self.hop or self._run < self.capacity:
+            return None
+        order = np.r_[self._head:self.capacity, 0:self._head]
+        self.windows += 1
+        stop = sample.index + 1
+        return Window(seq=stop // self.hop, start_index=stop - self.window, stop_index=stop,
+                      history=self.history, stamps_ns=self._stamps[order],
+                      values=self._values[order], signals=self.signals,
+                      due_monotonic=time.monotonic())
+
+
+class LatestQueue(Generic[T]):
+    """Bounded FIFO where ``put`` never blocks: when full the oldest item is skipped."""
+
+    def __init__(self, maxsize: int = 1) -> None:
+        if maxsize < 1:
+            raise DataError(f"queue size must be >= 1, got {maxsize}")
+        self._items: deque[T] = deque()
+        self._maxsize = maxsize
+        self._cond = threading.Condition()
+        self._closed = False
+        self.skipped = 0
+        self.put_count = 0
+
+    def put(self, item: T) -> None:
+        with self._cond:
+            if len(self._items) >= self._maxsize:
+                self._items.popleft()
+                self.skipped += 1
+            self._items.append(item)
+            self.put_count += 1
+            self._cond.notify()
+
+    def get(self, timeout: float | None = None) -> T | None:
+        """Next item, or None on timeout or once closed and empty."""
+        with self._cond:
+            if not self._cond.wait_for(lambda: self._items or self._closed, timeout):
+                return None
+            return self._items.popleft() if self._items else None
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+
+    @property
+    def closed(self) -> bool:
+        with self._cond:
+            return self._closed and not self._items
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self._items)
+
+
+@dataclass(frozen=True)
+class WorkerStats:
+    """What the fitting thread did: counts, CPU seconds of the thread, latencies (s)."""
+
+    processed: int
+    failed: int
+    cpu_s: float
+    latencies_s: tuple[float, ...]
+
+
+class FitWorker(Generic[T, R]):
+    """A thread applying ``fn`` to queued items; results (or errors) go to ``on_result``.
+
+    ``fn`` runs off the caller's thread, so the subscription path only pays for the copy of
+    a window. Exceptions are passed to ``on_error`` and counted, never kill the thread.
+    """
+
+    def __init__(self, queue: LatestQueue[T], fn: Callable[[T], R],
+                 on_result: Callable[[T, R], None],
+                 on_error: Callable[[T, Exception], None] | None = None,
+                 latency_of: Callable[[T], float] | None = None,
+                 name: str = "fit-worker", keep_latencies: int = 4096) -> None:
+        self._queue, self._fn = queue, fn
+        self._on_result, self._on_error = on_result, on_error
+        self._latency_of = latency_of
+        self._lat: deque[float] = deque(maxlen=keep_latencies)
+        self._processed = self._failed = 0
+        self._cpu = 0.0
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self, timeout: float = 10.0) -> None:
+        """Close the queue and wait for the current item to finish."""
+        self._queue.close()
+        if self._thread.is_alive():
+            self._thread.join(timeout)
+
+    @property
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    @property
+    def stats(self) -> WorkerStats:
+        with self._lock:
+            return WorkerStats(self._processed, self._failed, self._cpu, tuple(self._lat))
+
+    def _loop(self) -> None:
+        while True:
+            item = self._queue.get(timeout=0.5)
+            if item is None:
+                if self._queue.closed:
+                    return
+                continue
+            c0 = time.thread_time()
+            try:
+                result = self._fn(item)
+            except Exception as exc:  # reported, counted; the thread must keep running
+                with self._lock:
+                    self._failed += 1
+                if self._on_error is not None:
+                    self._on_error(item, exc)
+            else:
+                self._on_result(item, result)
+            with self._lock:
+                self._processed += 1
+                self._cpu += time.thread_time() - c0
+                if self._latency_of is not None:
+                    self._lat.append(time.monotonic() - self._latency_of(item))
+

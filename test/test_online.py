@@ -1,0 +1,269 @@
+"""Streaming alignment, windowing and hand-over of the online identifier (core/online.py)."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pmsm_sysid.core.errors import DataError
+from pmsm_sysid.core.online import (
+    SIGNALS,
+    FitWorker,
+    LatestQueue,
+    Sample,
+    StampAligner,
+    Window,
+    WindowScheduler,
+)
+
+PERIOD = 2_000_000  # 500 Hz in ns
+
+
+def _messages(n: int, t0: int = 0, jitter: float = 0.0, seed: int = 0):
+    """(signal, stamp, value) for n samples; value encodes (sample, signal) for checking."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n):
+        for j, s in enumerate(SIGNALS):
+            dj = int(rng.uniform(-jitter, jitter) * PERIOD) if jitter else 0
+            out.append((s, t0 + k * PERIOD + dj, 10.0 * k + j))
+    return out
+
+
+def _run(aligner: StampAligner, msgs) -> list[Sample]:
+    out: list[Sample] = []
+    for s, t, v in msgs:
+        out.extend(aligner.push(s, t, v))
+    return out
+
+
+def _check_in_order(samples: list[Sample], first_index: int = 0) -> None:
+    for i, smp in enumerate(samples):
+        k = smp.index - first_index
+        assert smp.values == (10.0 * k, 10.0 * k + 1, 10.0 * k + 2)
+        if i:
+            assert smp.index > samples[i - 1].index
+
+
+def test_exact_stamps_align_every_sample_and_read_the_period() -> None:
+    al = StampAligner()
+    samples = _run(al, _messages(200)) + al.flush()
+    assert len(samples) == 200
+    assert [s.index for s in samples] == list(range(200))
+    _check_in_order(samples)
+    assert al.period_ns == PERIOD and al.tolerance_ns == PERIOD // 2
+    st_ = al.stats
+    assert (st_.messages, st_.samples, st_.unaligned, st_.gaps) == (600, 200, 0, 0)
+
+
+def test_absolute_index_follows_the_stamp_grid() -> None:
+    """Index = stamp / period, so another process seeing a later start agrees on indices."""
+    al = StampAligner()
+    samples = _run(al, _messages(50, t0=1000 * PERIOD))
+    assert samples[0].index == 1000
+    _check_in_order(samples, first_index=1000)
+
+
+def test_jittered_stamps_within_tolerance_are_joined() -> None:
+    al = StampAligner()
+    samples = _run(al, _messages(300, t0=10 * PERIOD, jitter=0.2, seed=3)) + al.flush()
+    assert len(samples) == 300
+    _check_in_order(samples, first_index=samples[0].index)
+    assert al.stats.unaligned == 0 and al.stats.gaps == 0
+
+
+def test_lost_message_is_counted_unaligned_and_as_a_gap() -> None:
+    msgs = [m for m in _messages(100) if not (m[0] == "speed" and m[1] == 40 * PERIOD)]
+    al = StampAligner()
+    samples = _run(al, msgs) + al.flush()
+    assert len(samples) == 99
+    assert 40 not in [s.index for s in samples]
+    st_ = al.stats
+    assert st_.unaligned == 2  # thrust and position of sample 40 had no partner
+    assert st_.gaps == 1 and st_.samples_missing == 1
+
+
+def test_duplicates_and_late_messages_are_counted_not_used() -> None:
+    msgs = _messages(60)
+    msgs.insert(30, ("speed", 9 * PERIOD, -1.0))  # duplicate of an emitted sample
+    msgs.append(("thrust", 6 * PERIOD, -2.0))  # long after sample 6 left: out of order
+    msgs.insert(3, ("thrust", 0, -3.0))  # repeat while sample 0 is still pending
+    al = StampAligner()
+    samples = _run(al, msgs) + al.flush()
+    assert len(samples) == 60
+    _check_in_order(samples)  # the first value was kept, the repeats were not used
+    assert al.stats.duplicates == 2 and al.stats.out_of_order == 1
+
+
+def test_late_message_beyond_tolerance_is_out_of_order() -> None:
+    msgs = _messages(60)
+    msgs.append(("thrust", 20 * PERIOD + PERIOD // 3, -2.0))  # old stamp, matches nothing
+    al = StampAligner()
+    _run(al, msgs)
+    assert al.stats.out_of_order == 1 and al.stats.duplicates == 0
+
+
+def test_interleaving_across_samples_keeps_stamp_order() -> None:
+    """Speed of sample k arrives after thrust of k+3: still emitted in order."""
+    msgs = _messages(100)
+    by_signal = {s: [m for m in msgs if m[0] == s] for s in SIGNALS}
+    delayed = by_signal["thrust"][:3]
+    for k in range(100):
+        if k + 3 < 100:
+            delayed.append(by_signal["thrust"][k + 3])
+        delayed += [by_signal["speed"][k], by_signal["position"][k]]
+    al = StampAligner()
+    samples = _run(al, delayed) + al.flush()
+    assert [s.index for s in samples] == list(range(100))
+    _check_in_order(samples)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31), st.integers(1, 6))
+def test_any_bounded_interleaving_is_undone(seed: int, spread: int) -> None:
+    """Each topic arrives in order (DDS keeps per-topic order) but the topics drift against
+    each other by up to ``spread`` samples: every sample still comes out, in order."""
+    msgs = _messages(80)
+    rng = np.random.default_rng(seed)
+    arrival = {s: np.maximum.accumulate(np.arange(80) + rng.uniform(0, spread, 80))
+               for s in SIGNALS}
+    keys = [arrival[m[0]][i // 3] + 1e-3 * (i % 3) for i, m in enumerate(msgs)]
+    shuffled = [msgs[i] for i in np.argsort(keys, kind="stable")]
+    al = StampAligner(period_ns=PERIOD)
+    samples = _run(al, shuffled) + al.flush()
+    assert [s.index for s in samples] == list(range(80))
+    _check_in_order(samples)
+
+
+def test_joint_state_layout_pushes_whole_samples() -> None:
+    al = StampAligner()
+    out = []
+    for k in range(20):
+        out += al.push_sample(k * PERIOD, (10.0 * k, 10.0 * k + 1, 10.0 * k + 2))
+    out += al.push_sample(19 * PERIOD, (0.0, 0.0, 0.0))
+    out += al.flush()
+    assert [s.index for s in out] == list(range(20))
+    _check_in_order(out)
+    assert al.stats.duplicates == 3
+
+
+def test_pending_table_stays_bounded_when_a_signal_never_arrives() -> None:
+    al = StampAligner(period_ns=PERIOD)
+    for k in range(5000):
+        assert al.push("thrust", k * PERIOD, 0.0) == []
+        assert al.push("position", k * PERIOD, 0.0) == []
+    assert len(al._pending) <= 17
+    assert al.stats.unaligned >= 2 * (5000 - 17)
+
+
+def test_bad_inputs_raise_data_error() -> None:
+    with pytest.raises(DataError):
+        StampAligner().push("torque", 0, 1.0)
+    with pytest.raises(DataError):
+        StampAligner(signals=("a", "a"))
+    with pytest.raises(DataError):
+        StampAligner(period_ns=0)
+    with pytest.raises(DataError):
+        WindowScheduler(window=1)
+    with pytest.raises(DataError):
+        StampAligner().push_sample(0, (1.0,))
+
+
+def _feed(sched: WindowScheduler, data: np.ndarray, indices) -> list[Window]:
+    wins = []
+    for k in indices:
+        w = sched.push(Sample(int(k), int(k) * PERIOD, tuple(data[k])))
+        if w is not None:
+            wins.append(w)
+    return wins
+
+
+def test_windows_are_cut_on_the_index_grid_with_history() -> None:
+    rng = np.random.default_rng(1)
+    data = rng.standard_normal((3000, 3))
+    sched = WindowScheduler(window=1000, hop=250, history=40)
+    wins = _feed(sched, data, range(3000))
+    # first window needs 1040 samples and must end on the grid: stop = 1250
+    assert [w.stop_index for w in wins] == list(range(1250, 3001, 250))
+    for w in wins:
+        assert w.stop_index - w.start_index == 1000 and w.seq == w.stop_index // 250
+        np.testing.assert_array_equal(w.values, data[w.start_index - 40:w.stop_index])
+        np.testing.assert_array_equal(w.signal("speed"), data[w.start_index:w.stop_index, 1])
+        assert w.start_stamp == w.start_index * PERIOD / 1e9
+        assert w.end_stamp == (w.stop_index - 1) * PERIOD / 1e9
+        rec = w.recording(500.0, with_history=False)
+        np.testing.assert_array_equal(rec.thrust, data[w.start_index:w.stop_index, 0])
+    assert sched.capacity == 1040
+
+
+def test_a_gap_restarts_the_contiguous_count() -> None:
+    data = np.zeros((4000, 3))
+    indices = [k for k in range(4000) if k != 1500]
+    wins = _feed(WindowScheduler(window=1000, hop=250), data, indices)
+    for w in wins:
+        assert not (w.start_index <= 1500 < w.stop_index)
+    assert [w.stop_index for w in wins] == [1000, 1250, 1500, 2750, 3000, 3250, 3500, 3750, 4000]
+
+
+def test_latest_queue_skips_the_oldest_and_counts() -> None:
+    q: LatestQueue[int] = LatestQueue(maxsize=2)
+    for i in range(5):
+        q.put(i)
+    assert q.skipped == 3 and len(q) == 2
+    assert q.get(0.1) == 3 and q.get(0.1) == 4 and q.get(0.01) is None
+    q.close()
+    assert q.get(0.1) is None and q.closed
+
+
+def test_slow_fits_skip_windows_but_never_lose_samples() -> None:
+    """A producer at full speed and a worker 50x slower: every sample is stored, every
+    window is either fitted or counted as skipped, memory stays fixed."""
+    sched = WindowScheduler(window=200, hop=50)
+    q: LatestQueue[Window] = LatestQueue(maxsize=1)
+    fitted: list[int] = []
+    errors: list[Exception] = []
+
+    def fit(w: Window) -> float:
+        time.sleep(0.01)
+        if w.seq == 30:
+            raise DataError("bad window")
+        return float(w.signal("thrust").sum())
+
+    worker: FitWorker[Window, float] = FitWorker(
+        q, fit, lambda w, r: fitted.append(w.seq), lambda w, e: errors.append(e),
+        latency_of=lambda w: w.due_monotonic)
+    worker.start()
+    data = np.arange(60_000, dtype=float)[:, None].repeat(3, axis=1)
+    for k in range(60_000):
+        w = sched.push(Sample(k, k * PERIOD, tuple(data[k])))
+        if w is not None:
+            q.put(w)
+        if k % 500 == 0:
+            time.sleep(0.001)
+    worker.stop()
+    stats = worker.stats
+    assert sched.samples == 60_000 and sched.capacity == 200
+    assert stats.processed + q.skipped == sched.windows == (60_000 - 200) // 50 + 1
+    assert q.skipped > 0 and stats.processed == len(fitted) + stats.failed
+    assert stats.failed == len(errors) <= 1
+    assert len(stats.latencies_s) == stats.processed and stats.cpu_s >= 0
+    assert not worker.alive
+
+
+def test_worker_runs_off_the_calling_thread() -> None:
+    q: LatestQueue[int] = LatestQueue(maxsize=4)
+    seen: list[str] = []
+    worker: FitWorker[int, str] = FitWorker(
+        q, lambda i: threading.current_thread().name, lambda i, r: seen.append(r))
+    worker.start()
+    q.put(1)
+    deadline = time.monotonic() + 5
+    while not seen and time.monotonic() < deadline:
+        time.sleep(0.01)
+    worker.stop()
+    assert seen == ["fit-worker"]
