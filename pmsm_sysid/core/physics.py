@@ -1,0 +1,298 @@
+"""The linear PMSM axis as a sampled simulator (issue 2 item 3; timing of contract §1).
+
+Mechanical equation, integrated with fixed-step RK4::
+
+    M dv/dt = F_motor + w - B v - F_effects(x, v, F)      dx/dt = v
+    F_motor = F * (1 + ripple(x))                          (ripple is inside F_effects)
+    tau dF/dt = F_cmd(t - delay) - F                       (thrust lag; F = F_cmd without it)
+
+``F_cmd`` is the thrust command held over each sample period (zero-order hold) and ``w`` the
+white process force of the ``noise`` block, drawn once per sample and held. Numerical choices:
+
+* The lag state is integrated in closed form inside each sub-step (the command is constant
+  there), so a short lag such as the winding constant L/R = 0.41 ms never makes RK4 unstable;
+  RK4 integrates (x, v) with that exact force trajectory at its stage times.
+* ``plant.substeps`` is the minimum number of RK4 steps per sample (default 8: 0.25 ms at
+  500 Hz, 0.6 L/R). The simulator raises it when an effect is stiff, so that h*lambda <= 1
+  for the fastest mode (viscous B/M, smoothed friction Fc/(M v_s), spring/cogging
+  sqrt(k/M)) and h <= tau for the lag (capped at 64 steps: a shorter lag's transient is
+  then below 1e-5 of a sample's impulse).
+* sign(v) is ``tanh(v / smoothing_mps)`` (default 1 mm/s): smooth, so RK4 keeps its order;
+  a body left to rest under a force below the friction level creeps at about
+  ``smoothing_mps * atanh(F/Fc)`` instead of sticking.
+* A transport delay of any length is exact: the delayed command switches value at
+  ``t_k + delay`` and the sample period is split there into two RK4-integrated pieces.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .errors import DataError, PlantError
+from .plant import Plant, dump_plant
+from .signals import Recording
+
+FloatArray = NDArray[np.float64]
+
+_MAX_LAG_STEPS = 64
+_HISTORY_MIN = 1024
+
+
+def _effects(plant: Plant, x: Any, v: Any, f: Any,
+             sin: Callable[[Any], Any], exp: Callable[[Any], Any],
+             tanh: Callable[[Any], Any]) -> Any:
+    """F_effects for scalars (math) or arrays (numpy): one formula for both paths."""
+    total: Any = 0.0
+    cog = plant.cogging
+    if cog is not None:
+        k = 2.0 * math.pi / cog.pitch_m
+        total = total + cog.amplitude_n * sin(k * x + cog.phase_rad)
+        for h in cog.harmonics:
+            total = total + h.amplitude_n * sin(h.order * k * x + h.phase_rad)
+    cf = plant.coulomb_friction
+    if cf is not None:
+        total = total + cf.amplitude_n * tanh(v / cf.smoothing_mps)
+    sf = plant.stribeck_friction
+    if sf is not None:
+        hump = exp(-((v / sf.velocity_mps) ** 2))
+        total = total + sf.static_n * hump * tanh(v / sf.smoothing_mps)
+    if plant.force_offset is not None:
+        total = total + plant.force_offset.amplitude_n
+    rip = plant.thrust_ripple
+    if rip is not None:
+        total = total - rip.relative * sin(2.0 * math.pi * x / rip.pitch_m + rip.phase_rad) * f
+    if plant.spring is not None:
+        total = total + plant.spring.stiffness_n_per_m * x
+    return total
+
+
+def effects_force(plant: Plant, x: ArrayLike, v: ArrayLike, f_applied: ArrayLike) -> FloatArray:
+    """Vectorised F_effects(x, v, F) in ``M dv/dt = F - B v - F_effects`` (N).
+
+    Cogging ``A sin(2 pi x/p + phi) + harmonics``, Coulomb ``Fc sign(v)``, Stribeck, the
+    offset, minus the ripple ``r sin(2 pi x/p + phi) F``, and the spring ``k x``. Thrust lag
+    and transport delay are dynamic and live in :class:`MotorSimulator`.
+    """
+    xa, va, fa = (np.asarray(a, dtype=np.float64) for a in (x, v, f_applied))
+    out = _effects(plant, xa, va, fa, np.sin, np.exp, np.tanh)
+    return np.asarray(np.broadcast_to(out, np.broadcast_shapes(xa.shape, va.shape, fa.shape)),
+                      dtype=np.float64).copy()
+
+
+def stiff_rate(plant: Plant) -> float:
+    """Fastest mechanical rate (1/s) that bounds the RK4 step: max of B/M, friction, springs."""
+    m = plant.mass_kg
+    rates = [plant.viscous_n_per_mps / m]
+    if plant.coulomb_friction is not None:
+        cf = plant.coulomb_friction
+        rates.append(abs(cf.amplitude_n) / (m * cf.smoothing_mps))
+    if plant.stribeck_friction is not None:
+        sf = plant.stribeck_friction
+        rates.append(sf.static_n / (m * min(sf.smoothing_mps, sf.velocity_mps)))
+    if plant.spring is not None:
+        rates.append(math.sqrt(plant.spring.stiffness_n_per_m / m))
+    if plant.cogging is not None:
+        cog = plant.cogging
+        grad = abs(cog.amplitude_n) + sum(h.order * abs(h.amplitude_n) for h in cog.harmonics)
+        rates.append(math.sqrt(2.0 * math.pi * grad / (cog.pitch_m * m)))
+    return max(rates)
+
+
+def effective_substeps(plant: Plant) -> int:
+    """RK4 steps per sample actually used: ``plant.substeps`` raised for stiff effects."""
+    period = plant.sample_period_s
+    n = max(plant.substeps, math.ceil(period * stiff_rate(plant) - 1e-12))
+    lag = plant.thrust_lag
+    if lag is not None and lag.tau_s > 0:
+        n = max(n, min(_MAX_LAG_STEPS, math.ceil(period / lag.tau_s - 1e-12)))
+    return int(n)
+
+
+@dataclass(frozen=True)
+class MotorState:
+    """True (noise-free) state: position (m), speed (m/s), lagged motor force (N)."""
+
+    position_m: float
+    speed_mps: float
+    force_n: float
+
+
+class MotorSimulator:
+    """Sample-by-sample simulator: ``measure()`` at t_k, then ``advance(thrust_k)``.
+
+    The same calls in the same order give bit-for-bit the same numbers, whether they come from
+    :func:`simulate` or from the live sim node. All randomness comes from ``seed``: one
+    stream for the measurement noise (two normals per sample) and one for the process force
+    (one normal per sample), drawn whether or not the plant has a ``noise`` block, so that
+    switching noise on at run time does not shift the other streams.
+    """
+
+    def __init__(self, plant: Plant, seed: int = 0, x0: float = 0.0, v0: float = 0.0) -> None:
+        if not (math.isfinite(x0) and math.isfinite(v0)):
+            raise PlantError(f"initial state must be finite, got x0={x0}, v0={v0}")
+        meas_seq, force_seq = np.random.SeedSequence(int(seed)).spawn(2)
+        self._rng_meas = np.random.Generator(np.random.PCG64(meas_seq))
+        self._rng_force = np.random.Generator(np.random.PCG64(force_seq))
+        self._x, self._v, self._f = float(x0), float(v0), 0.0
+        self._k = 0
+        self._history: deque[float] = deque(maxlen=_HISTORY_MIN)
+        self._plant = plant
+        self._configure(plant)
+        self._z = self._draw_measurement()
+
+    # ------------------------------------------------------------------ public interface
+    @property
+    def plant(self) -> Plant:
+        return self._plant
+
+    @property
+    def sample_index(self) -> int:
+        """Number of samples advanced so far (k of the next ``measure``)."""
+        return self._k
+
+    @property
+    def time_s(self) -> float:
+        """Time of the current sample, k / fs (s)."""
+        return self._k / self._plant.sample_rate_hz
+
+    @property
+    def state(self) -> MotorState:
+        return MotorState(self._x, self._v, self._f)
+
+    @property
+    def substeps(self) -> int:
+        """RK4 steps per sample in use (see :func:`effective_substeps`)."""
+        return self._n_sub
+
+    def measure(self) -> tuple[float, float]:
+        """(speed, position) measured at the current sample: noise then quantisation."""
+        speed, position = self._v, self._x
+        noise, quant = self._plant.noise, self._plant.quantisation
+        if noise is not None:
+            speed += noise.speed_std * self._z[0]
+            position += noise.position_std * self._z[1]
+        if quant is not None:
+            speed = _quantise(speed, quant.speed_mps)
+            position = _quantise(position, quant.position_m)
+        return speed, position
+
+    def advance(self, thrust: float) -> None:
+        """Hold ``thrust`` (N) for one sample period and step the state to t_{k+1}."""
+        u = float(thrust)
+        if not math.isfinite(u):
+            raise DataError(f"thrust at sample {self._k} is not finite ({thrust})")
+        self._history.append(u)
+        w_std = self._plant.noise.force_std if self._plant.noise is not None else 0.0
+        w = w_std * float(self._rng_force.standard_normal())
+        for duration, cmd in self._segments():
+            self._integrate(duration, cmd, w)
+        self._k += 1
+        self._z = self._draw_measurement()
+
+    def set_plant(self, plant: Plant) -> None:
+        """Change parameters now, keeping x, v, the lag state, the delay line and the noise."""
+        if plant.sample_rate_hz != self._plant.sample_rate_hz:
+            raise PlantError("the sample rate cannot change during a run "
+                             f"({self._plant.sample_rate_hz} -> {plant.sample_rate_hz} Hz)")
+        self._plant = plant
+        self._configure(plant)
+
+    # ------------------------------------------------------------------ internals
+    def _configure(self, plant: Plant) -> None:
+        period = plant.sample_period_s
+        self._n_sub = effective_substeps(plant)
+        self._h = period / self._n_sub
+        delay = plant.transport_delay.delay_s if plant.transport_delay is not None else 0.0
+        ratio = delay / period
+        m = math.floor(ratio + 1e-9)
+        frac = (ratio - m) * period
+        self._delay_m = m
+        self._delay_r = 0.0 if frac <= 1e-9 * period else frac
+        if m + 2 > (self._history.maxlen or 0):
+            self._history = deque(self._history, maxlen=m + 2)
+        lag = plant.thrust_lag
+        self._tau = lag.tau_s if lag is not None else 0.0
+        self._inv_m = 1.0 / plant.mass_kg
+        self._b = plant.viscous_n_per_mps
+
+    def _draw_measurement(self) -> tuple[float, float]:
+        z = self._rng_meas.standard_normal(2)
+        return float(z[0]), float(z[1])
+
+    def _command(self, back: int) -> float:
+        """The command ``back`` samples before the newest (0 before the start)."""
+        return self._history[-1 - back] if back < len(self._history) else 0.0
+
+    def _segments(self) -> list[tuple[float, float]]:
+        """(duration, command) pieces of this sample period after the transport delay."""
+        period = self._plant.sample_period_s
+        m, r = self._delay_m, self._delay_r
+        if r == 0.0:
+            return [(period, self._command(m))]
+        return [(r, self._command(m + 1)), (period - r, self._command(m))]
+
+    def _integrate(self, duration: float, cmd: float, w: float) -> None:
+        steps = max(1, math.ceil(duration / self._h - 1e-9))
+        h = duration / steps
+        plant, inv_m, b, tau = self._plant, self._inv_m, self._b, self._tau
+        sin, exp, tanh = math.sin, math.exp, math.tanh
+        decay_half = math.exp(-0.5 * h / tau) if tau > 0 else 0.0
+        x, v = self._x, self._v
+        f = self._f if tau > 0 else cmd
+
+        def accel(xs: float, vs: float, fs: float) -> float:
+            eff = float(_effects(plant, xs, vs, fs, sin, exp, tanh))
+            return (fs + w - b * vs - eff) * inv_m
+
+        for _ in range(steps):
+            f_mid = cmd + (f - cmd) * decay_half
+            f_end = cmd + (f_mid - cmd) * decay_half
+            a1 = accel(x, v, f)
+            x2, v2 = x + 0.5 * h * v, v + 0.5 * h * a1
+            a2 = accel(x2, v2, f_mid)
+            x3, v3 = x + 0.5 * h * v2, v + 0.5 * h * a2
+            a3 = accel(x3, v3, f_mid)
+            x4, v4 = x + h * v3, v + h * a3
+            a4 = accel(x4, v4, f_end)
+            x += h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
+            v += h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+            f = f_end
+        self._x, self._v, self._f = x, v, f
+
+
+def _quantise(value: float, step: float) -> float:
+    return round(value / step) * step if step > 0 else value
+
+
+def simulate(plant: Plant, thrust: ArrayLike, seed: int = 0, x0: float = 0.0, v0: float = 0.0,
+             t0: float = 0.0) -> Recording:
+    """Run ``thrust`` (one value per sample) through the plant; contract §1 timing.
+
+    ``speed[k], position[k]`` are measured at ``t[k] = t0 + k/fs``, then ``thrust[k]`` is
+    held over [t_k, t_{k+1}), so y(k) depends on u(k-1) and earlier.
+    """
+    u = np.asarray(thrust, dtype=np.float64)
+    if u.ndim != 1 or len(u) < 1:
+        raise DataError(f"thrust must be a 1-D array with samples, got shape {u.shape}")
+    if not np.isfinite(u).all():
+        first = int(np.argmax(~np.isfinite(u)))
+        raise DataError(f"thrust has non-finite samples (first at index {first})")
+    sim = MotorSimulator(plant, seed=seed, x0=x0, v0=v0)
+    n = len(u)
+    speed = np.empty(n)
+    position = np.empty(n)
+    for k in range(n):
+        speed[k], position[k] = sim.measure()
+        sim.advance(u[k])
+    fs = plant.sample_rate_hz
+    meta = {"plant": dump_plant(plant), "seed": str(seed), "simulator": "pmsm_sysid.physics"}
+    return Recording(t=t0 + np.arange(n) / fs, thrust=u.copy(), speed=speed,
+                     position=position, sample_rate_hz=fs, source="simulate", meta=meta)
+
