@@ -1,0 +1,185 @@
+"""Change detection on the stream of window models (pure numpy).
+
+Each fitted window yields a few scalar *features* — the out-of-sample error of the previous
+model on the newest samples, the distance between consecutive term sets, the first-order
+GFRF at the excitation frequency, the H1 peak. On a stationary plant these wander within a
+spread of their own; a plant change (cogging switched on, a payload added) moves them beyond
+it. For every feature a running baseline over the last ``baseline`` windows gives a robust
+centre (median) and scale (1.4826 x MAD, never below an absolute and a relative floor), and
+the window's robust z-score.
+
+Decision (one rule for every feature): a change is reported at window j when some feature has
+z >= ``z_fire``, or z >= ``z_confirm`` at both j and j-1 (a persistent shift). After a change
+the baselines are cleared and relearnt over ``warmup`` windows (no decision meanwhile), so the
+new regime becomes the reference. A value that is not finite counts as "no observation" for
+two-sided features and as +inf for one-sided (error-like) ones.
+
+Thresholds were calibrated on simulated runs of the nominal plant (no alarm over long
+stationary runs) and of cogging/payload switches (detected within three windows); see
+``test/test_change.py``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import DataError
+
+MAD_TO_SIGMA = 1.4826
+
+
+@dataclass(frozen=True)
+class FeatureSpec:
+    """One monitored feature: ``one_sided`` features only alarm when they increase."""
+
+    name: str
+    one_sided: bool = False
+    floor: float = 0.0
+    rel_floor: float = 0.0
+
+
+@dataclass(frozen=True)
+class ChangeConfig:
+    """Detector settings; defaults are the calibrated ones."""
+
+    baseline: int = 24
+    warmup: int = 8
+    z_fire: float = 12.0
+    z_confirm: float = 6.0
+
+    def __post_init__(self) -> None:
+        if self.warmup < 3 or self.baseline < self.warmup:
+            raise DataError(f"change detector: need 3 <= warmup <= baseline "
+                            f"(got {self.warmup}, {self.baseline})")
+        if not 0 < self.z_confirm <= self.z_fire:
+            raise DataError(f"change detector: need 0 < z_confirm <= z_fire "
+                            f"(got {self.z_confirm}, {self.z_fire})")
+
+
+@dataclass(frozen=True)
+class ChangeDecision:
+    """Outcome for one window: ``state`` is ``learning``, ``steady`` or ``change``."""
+
+    seq: int
+    state: str
+    z: dict[str, float] = field(default_factory=dict)
+    values: dict[str, float] = field(default_factory=dict)
+    reasons: tuple[str, ...] = ()
+
+    @property
+    def changed(self) -> bool:
+        return self.state == "change"
+
+    @property
+    def score(self) -> float:
+        """Largest z of the window (0 while learning; features without a value skipped)."""
+        return max((v for v in self.z.values() if not math.isnan(v)), default=0.0)
+
+    def to_dict(self) -> dict[str, object]:
+        return {"seq": self.seq, "state": self.state, "reasons": list(self.reasons),
+                "z": dict(self.z), "values": dict(self.values)}
+
+
+class RobustBaseline:
+    """Median and MAD-based scale of the last ``size`` finite values."""
+
+    def __init__(self, size: int, floor: float = 0.0, rel_floor: float = 0.0) -> None:
+        self._values: deque[float] = deque(maxlen=size)
+        self._floor, self._rel = floor, rel_floor
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def add(self, value: float) -> None:
+        if math.isfinite(value):
+            self._values.append(value)
+
+    def clear(self) -> None:
+        self._values.clear()
+
+    def centre_scale(self) -> tuple[float, float]:
+        arr = np.fromiter(self._values, dtype=np.float64)
+        med = float(np.median(arr))
+        mad = float(np.median(np.abs(arr - med)))
+        return med, max(MAD_TO_SIGMA * mad, self._floor, self._rel * abs(med), 1e-300)
+
+    def z(self, value: float, one_sided: bool) -> float:
+        """Robust z-score of ``value`` (signed excess for one-sided features, else |z|)."""
+        med, scale = self.centre_scale()
+        if not math.isfinite(value):
+            return math.inf if one_sided else math.nan
+        d = (value - med) / scale
+        return d if one_sided else abs(d)
+
+
+class ChangeDetector:
+    """Feeds per-window features into robust baselines and applies the decision rule."""
+
+    def __init__(self, features: Sequence[FeatureSpec],
+                 config: ChangeConfig | None = None) -> None:
+        if not features:
+            raise DataError("change detector needs at least one feature")
+        self.config = config or ChangeConfig()
+        self.features = {f.name: f for f in features}
+        self._base = {f.name: RobustBaseline(self.config.baseline, f.floor, f.rel_floor)
+                      for f in features}
+        self._prev_hot: set[str] = set()
+        self._since_reset = 0
+        self.events: list[ChangeDecision] = []
+
+    def update(self, seq: int, values: Mapping[str, float]) -> ChangeDecision:
+        """Judge window ``seq`` from its feature ``values`` (unknown names are ignored)."""
+        vals = {k: float(values[k]) for k in self.features if k in values}
+        cfg = self.config
+        if self._since_reset < cfg.warmup:
+            self._learn(vals)
+            return ChangeDecision(seq, "learning", values=vals)
+        z = {k: self._base[k].z(v, self.features[k].one_sided) for k, v in vals.items()}
+        hot = {k for k, s in z.items() if s >= cfg.z_confirm}
+        fire = sorted(k for k, s in z.items() if s >= cfg.z_fire)
+        confirmed = sorted(hot & self._prev_hot)
+        self._prev_hot = hot
+        reasons = tuple(dict.fromkeys(fire + confirmed))
+        if reasons:
+            self.reset()
+            decision = ChangeDecision(seq, "change", z, vals, reasons)
+            self.events.append(decision)
+            return decision
+        self._learn(vals)
+        return ChangeDecision(seq, "steady", z, vals)
+
+    def reset(self) -> None:
+        """Forget the baselines (after a change, or when the caller restarts the stream)."""
+        for b in self._base.values():
+            b.clear()
+        self._prev_hot = set()
+        self._since_reset = 0
+
+    def _learn(self, vals: Mapping[str, float]) -> None:
+        for k, v in vals.items():
+            self._base[k].add(v)
+        self._since_reset += 1
+
+
+def jaccard_distance(a: Iterable[str], b: Iterable[str]) -> float:
+    """1 - |A ∩ B| / |A ∪ B| of two term-name sets (0 = same terms, 1 = disjoint)."""
+    sa, sb = set(a), set(b)
+    union = sa | sb
+    return 0.0 if not union else 1.0 - len(sa & sb) / len(union)
+
+
+def nrmse(y: Sequence[float] | np.ndarray, y_hat: Sequence[float] | np.ndarray) -> float:
+    """Root-mean-square error over the standard deviation of ``y`` (inf if not finite)."""
+    ya, yh = np.asarray(y, dtype=np.float64), np.asarray(y_hat, dtype=np.float64)
+    if ya.shape != yh.shape or ya.size < 2:
+        raise DataError(f"nrmse: need two equal-length series (got {ya.shape}, {yh.shape})")
+    err = float(np.sqrt(np.mean((ya - yh) ** 2)))
+    sd = float(np.std(ya))
+    if not math.isfinite(err):
+        return math.inf
+    return err / sd if sd > 0 else (0.0 if err == 0 else math.inf)
