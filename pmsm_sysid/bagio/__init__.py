@@ -1,0 +1,36 @@
+"""rosbag2 I/O: the only package that touches recordings on disk (contract §2).
+
+Bags are stock rosbag2 directories (``metadata.yaml`` + ``.mcap`` or ``.db3``) written with
+``rosbags``: message definitions and type hashes are embedded and offered QoS profiles are
+in the metadata, so ``ros2 bag info``, Foxglove and a plain ``rosbags`` ``AnyReader`` read
+them without this package.
+
+- :func:`write_recording` / :func:`read_recording`: whole recordings (contract §1 topics);
+- :func:`iter_raw`, :func:`bag_topics`: serialized messages in log order, for replay;
+- :class:`BagRecorder`, :func:`repair`: streaming recording that survives being killed;
+- :func:`typestore`: ROS 2 Jazzy types plus the package's ``msg_schemas`` as
+  ``pmsm_sysid/msg/<Name>``.
+"""
+
+from __future__ import annotations
+
+from .common import (
+    DEFAULT_QOS,
+    FRAME_ID,
+    LoadedRecording,
+    RawMessage,
+    connection_args,
+    open_reader,
+    schema_dir,
+    storage_plugin,
+    typestore,
+)
+from .read import bag_topics, iter_raw, read_recording
+from .recorder import BagRecorder, repair
+from .write import write_recording
+
+__all__ = [
+    "DEFAULT_QOS", "FRAME_ID", "BagRecorder", "LoadedRecording", "RawMessage", "bag_topics",
+    "connection_args", "iter_raw", "open_reader", "read_recording", "repair", "schema_dir",
+    "storage_plugin", "typestore", "write_recording",
+]

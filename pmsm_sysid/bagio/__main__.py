@@ -1,0 +1,29 @@
+"""``python -m pmsm_sysid.bagio repair BAG``: rebuild metadata.yaml of a killed sqlite3 bag."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..core.errors import SysIdError
+from .recorder import repair
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m pmsm_sysid.bagio",
+                                     description=__doc__.split(":")[0])
+    sub = parser.add_subparsers(dest="cmd", required=True)
+    rep = sub.add_parser("repair", help="rebuild metadata.yaml of a sqlite3 bag")
+    rep.add_argument("bag")
+    args = parser.parse_args(argv)
+    try:
+        n = repair(args.bag)
+    except SysIdError as exc:
+        print(f"repair: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"{args.bag}: metadata.yaml rebuilt, {n} messages")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

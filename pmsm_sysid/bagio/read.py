@@ -1,0 +1,190 @@
+"""Reading recordings: find the input topics, decode ``header.stamp`` and values, align."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Collection, Iterator
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import topics as tp
+from ..core.align import align_streams
+from ..core.errors import BagError
+from .common import LoadedRecording, RawMessage, open_reader, typestore
+
+SIGNALS = (tp.THRUST, tp.SPEED, tp.POSITION)
+# (stamps in ns, values) of one stream while reading
+_Stream = tuple[list[int], list[float]]
+
+
+def bag_topics(path: str | Path) -> dict[str, str]:
+    """Topic -> message type of every topic in the bag."""
+    with open_reader(path) as reader:
+        return {c.topic: c.msgtype for c in reader.connections}
+
+
+def iter_raw(path: str | Path, topics: Collection[str] | None = None) -> Iterator[RawMessage]:
+    """Every message (or those on ``topics``) in log order, CDR bytes as stored: for replay."""
+    with open_reader(path) as reader:
+        conns = list(reader.connections)
+        if topics is not None:
+            wanted = set(topics)
+            missing = sorted(wanted - {c.topic for c in conns})
+            if missing:
+                have = ", ".join(sorted({c.topic for c in conns})) or "none"
+                raise BagError(f"{path}: no topic {', '.join(missing)} (topics: {have})")
+            conns = [c for c in conns if c.topic in wanted]
+            if not conns:
+                return
+        for conn, stamp, data in reader.messages(connections=conns):
+            yield RawMessage(conn.topic, conn.msgtype, int(stamp), bytes(data))
+
+
+def _listing(found: dict[str, str]) -> str:
+    return ", ".join(f"{k} ({v})" for k, v in sorted(found.items())) or "no topics at all"
+
+
+def _check_type(path: Path, found: dict[str, str], topic: str, expected: str) -> None:
+    if found[topic] != expected:
+        raise BagError(f"{path}: {topic} has type {found[topic]}, expected {expected}")
+
+
+def _triple(path: Path, found: dict[str, str], namespace: str) -> dict[str, str]:
+    """signal -> topic for the three-topic layout under ``namespace`` (speed optional)."""
+    chosen = {s: tp.input_topic(namespace, s) for s in SIGNALS}
+    missing = [chosen[s] for s in (tp.THRUST, tp.POSITION) if chosen[s] not in found]
+    if missing:
+        raise BagError(f"{path}: no {' and no '.join(missing)} topic (topics: {_listing(found)})")
+    if chosen[tp.SPEED] not in found:
+        del chosen[tp.SPEED]
+    for signal, topic in chosen.items():
+        _check_type(path, found, topic, tp.INPUT_TYPES[signal])
+    return chosen
+
+
+def _choose_layout(path: Path, found: dict[str, str], namespace: str | None) -> dict[str, str]:
+    """Either signal -> topic, or {"joint_state": topic} for the JointState layout."""
+    if namespace is not None:
+        if found.get(namespace) == tp.JOINT_STATE_TYPE:
+            return {"joint_state": namespace}
+        return _triple(path, found, namespace)
+    suffix_t, suffix_p = "/" + tp.THRUST, "/" + tp.POSITION
+    prefixes = sorted(t[: -len(suffix_t)] for t in found
+                      if t.endswith(suffix_t) and t[: -len(suffix_t)] + suffix_p in found)
+    if len(prefixes) == 1:
+        return _triple(path, found, prefixes[0] or "/")
+    if len(prefixes) > 1:
+        raise BagError(f"{path}: several input namespaces ({', '.join(prefixes)}); choose one "
+                       "with --namespace")
+    joints = sorted(t for t, m in found.items() if m == tp.JOINT_STATE_TYPE)
+    if len(joints) == 1:
+        return {"joint_state": joints[0]}
+    if len(joints) > 1:
+        raise BagError(f"{path}: several JointState topics ({', '.join(joints)}); choose one "
+                       "with --namespace")
+    raise BagError(f"{path}: no <ns>/thrust + <ns>/position topics and no JointState topic "
+                   f"(topics: {_listing(found)})")
+
+
+def _stamp_ns(msg: Any) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+_VALUE: dict[str, Callable[[Any], float]] = {
+    tp.THRUST_TYPE: lambda m: float(m.wrench.force.x),
+    tp.SPEED_TYPE: lambda m: float(m.twist.linear.x),
+    tp.POSITION_TYPE: lambda m: float(m.point.x),
+}
+
+
+def _read_triple(reader: Any, chosen: dict[str, str]) -> dict[str, _Stream]:
+    store = typestore()
+    by_topic = {topic: signal for signal, topic in chosen.items()}
+    streams: dict[str, _Stream] = {s: ([], []) for s in chosen}
+    conns = [c for c in reader.connections if c.topic in by_topic]
+    for conn, _, data in reader.messages(connections=conns):
+        msg = store.deserialize_cdr(data, conn.msgtype)
+        stamps, values = streams[by_topic[conn.topic]]
+        stamps.append(_stamp_ns(msg))
+        values.append(_VALUE[conn.msgtype](msg))
+    return streams
+
+
+def _joint_index(names: list[str], joint_name: str | None, seen: set[str]) -> int | None:
+    seen.update(names)
+    if joint_name is None:
+        return 0 if len(names) == 1 else None
+    return names.index(joint_name) if joint_name in names else None
+
+
+def _read_joint(path: Path, reader: Any, topic: str, joint_name: str | None) -> dict[str, _Stream]:
+    """JointState layout: effort = thrust, velocity = speed, position = position."""
+    store = typestore()
+    streams: dict[str, _Stream] = {s: ([], []) for s in SIGNALS}
+    fields = {tp.THRUST: "effort", tp.SPEED: "velocity", tp.POSITION: "position"}
+    seen: set[str] = set()
+    conns = [c for c in reader.connections if c.topic == topic]
+    for conn, _, data in reader.messages(connections=conns):
+        msg: Any = store.deserialize_cdr(data, conn.msgtype)
+        k = _joint_index(list(msg.name), joint_name, seen)
+        if k is None:
+            continue
+        stamp = _stamp_ns(msg)
+        for signal, field in fields.items():
+            arr = getattr(msg, field)
+            if len(arr) > k:
+                streams[signal][0].append(stamp)
+                streams[signal][1].append(float(arr[k]))
+    if joint_name is None and len(seen) > 1:
+        raise BagError(f"{path}: {topic} carries joints {', '.join(sorted(seen))}; "
+                       "choose one with --joint")
+    if not streams[tp.POSITION][0]:
+        what = f"joint '{joint_name}'" if joint_name else "a single joint"
+        names = ", ".join(sorted(seen)) or "none"
+        raise BagError(f"{path}: no {what} with positions on {topic} (joints: {names})")
+    if not streams[tp.THRUST][0]:
+        raise BagError(f"{path}: {topic} carries no effort (thrust) for the joint")
+    return streams
+
+
+def _seconds(stream: _Stream) -> tuple[np.ndarray[Any, np.dtype[np.float64]], list[float]]:
+    return np.asarray(stream[0], dtype=np.int64) / 1e9, stream[1]
+
+
+def read_recording(
+    path: str | Path,
+    *,
+    namespace: str | None = None,
+    tolerance_s: float | None = None,
+    joint_name: str | None = None,
+) -> LoadedRecording:
+    """Read and align the input signals of a bag (``header.stamp``, not receive time).
+
+    ``namespace`` None auto-detects the ``<ns>/thrust`` + ``<ns>/position`` (+ ``<ns>/speed``)
+    topics, or a single ``sensor_msgs/JointState`` topic (``namespace`` may also name that
+    topic). Speed absent -> derived from position and marked. See :func:`align_streams`.
+    """
+    path = Path(path)
+    with open_reader(path) as reader:
+        found = {c.topic: c.msgtype for c in reader.connections}
+        layout = _choose_layout(path, found, namespace)
+        if "joint_state" in layout:
+            streams = _read_joint(path, reader, layout["joint_state"], joint_name)
+            used = {layout["joint_state"]: tp.JOINT_STATE_TYPE}
+        else:
+            streams = _read_triple(reader, layout)
+            used = {topic: found[topic] for topic in layout.values()}
+        custom = getattr(reader.storage.metadata, "custom", None) or {}
+    speed = _seconds(streams[tp.SPEED]) if streams.get(tp.SPEED, ([], []))[0] else None
+    rec, report = align_streams(_seconds(streams[tp.THRUST]), speed,
+                                _seconds(streams[tp.POSITION]), tolerance_s=tolerance_s,
+                                source=str(path))
+    # The wire carries integer nanoseconds: read the rate from them (500 Hz, not 499.9999...).
+    ns = np.round(rec.t * 1e9).astype(np.int64)
+    rate = 1e9 / float(np.median(np.diff(ns)))
+    meta = {k: str(v) for k, v in custom.items()}
+    meta.update({"bag": str(path), "input_topics": ",".join(sorted(used))})
+    rec = replace(rec, meta=meta, sample_rate_hz=rate)
+    return LoadedRecording(recording=rec, report=report, topics=found)
