@@ -11,10 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pmsm_sysid.core.errors import DataError
+from pmsm_sysid.core.fitqueue import FitWorker, LatestQueue
 from pmsm_sysid.core.online import (
     SIGNALS,
-    FitWorker,
-    LatestQueue,
     Sample,
     StampAligner,
     Window,

@@ -10,23 +10,17 @@ The data path of the identifier node, kept free of ROS so it can be tested on pl
 2. :class:`WindowScheduler` — a fixed-size ring of the latest aligned samples; every ``hop``
    samples (on the absolute index grid, so two processes watching the same stamps cut the
    same windows) it copies out the latest ``window`` contiguous samples as a :class:`Window`.
-3. :class:`LatestQueue` — bounded, latest-wins hand-over from the subscription path to the
-   fitting thread: when fits cannot keep up the oldest waiting window is skipped and counted.
-4. :class:`FitWorker` — the thread that takes windows off the queue and runs the fits, so the
-   subscription path never waits for a fit.
 
-Memory is bounded everywhere: ring, pending table, queue and result list have fixed sizes.
+The hand-over to the fitting thread is in :mod:`.fitqueue`. Memory is bounded: the ring and
+the pending table have fixed sizes.
 """
 
 from __future__ import annotations
 
 import bisect
-import threading
 import time
-from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Generic, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -37,8 +31,6 @@ from .signals import Recording
 SIGNALS = ("thrust", "speed", "position")
 NS_PER_S = 1_000_000_000
 FloatArray = NDArray[np.float64]
-T = TypeVar("T")
-R = TypeVar("R")
 
 
 @dataclass(frozen=True, slots=True)
@@ -339,121 +331,3 @@ class WindowScheduler:
                       history=self.history, stamps_ns=self._stamps[order],
                       values=self._values[order], signals=self.signals,
                       due_monotonic=time.monotonic())
-
-
-class LatestQueue(Generic[T]):
-    """Bounded FIFO where ``put`` never blocks: when full the oldest item is skipped."""
-
-    def __init__(self, maxsize: int = 1) -> None:
-        if maxsize < 1:
-            raise DataError(f"queue size must be >= 1, got {maxsize}")
-        self._items: deque[T] = deque()
-        self._maxsize = maxsize
-        self._cond = threading.Condition()
-        self._closed = False
-        self.skipped = 0
-        self.put_count = 0
-
-    def put(self, item: T) -> None:
-        with self._cond:
-            if len(self._items) >= self._maxsize:
-                self._items.popleft()
-                self.skipped += 1
-            self._items.append(item)
-            self.put_count += 1
-            self._cond.notify()
-
-    def get(self, timeout: float | None = None) -> T | None:
-        """Next item, or None on timeout or once closed and empty."""
-        with self._cond:
-            if not self._cond.wait_for(lambda: self._items or self._closed, timeout):
-                return None
-            return self._items.popleft() if self._items else None
-
-    def close(self) -> None:
-        with self._cond:
-            self._closed = True
-            self._cond.notify_all()
-
-    @property
-    def closed(self) -> bool:
-        with self._cond:
-            return self._closed and not self._items
-
-    def __len__(self) -> int:
-        with self._cond:
-            return len(self._items)
-
-
-@dataclass(frozen=True)
-class WorkerStats:
-    """What the fitting thread did: counts, CPU seconds of the thread, latencies (s)."""
-
-    processed: int
-    failed: int
-    cpu_s: float
-    latencies_s: tuple[float, ...]
-
-
-class FitWorker(Generic[T, R]):
-    """A thread applying ``fn`` to queued items; results (or errors) go to ``on_result``.
-
-    ``fn`` runs off the caller's thread, so the subscription path only pays for the copy of
-    a window. Exceptions are passed to ``on_error`` and counted, never kill the thread.
-    """
-
-    def __init__(self, queue: LatestQueue[T], fn: Callable[[T], R],
-                 on_result: Callable[[T, R], None],
-                 on_error: Callable[[T, Exception], None] | None = None,
-                 latency_of: Callable[[T], float] | None = None,
-                 name: str = "fit-worker", keep_latencies: int = 4096) -> None:
-        self._queue, self._fn = queue, fn
-        self._on_result, self._on_error = on_result, on_error
-        self._latency_of = latency_of
-        self._lat: deque[float] = deque(maxlen=keep_latencies)
-        self._processed = self._failed = 0
-        self._cpu = 0.0
-        self._lock = threading.Lock()
-        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
-
-    def start(self) -> None:
-        self._thread.start()
-
-    def stop(self, timeout: float = 10.0) -> None:
-        """Close the queue and wait for the current item to finish."""
-        self._queue.close()
-        if self._thread.is_alive():
-            self._thread.join(timeout)
-
-    @property
-    def alive(self) -> bool:
-        return self._thread.is_alive()
-
-    @property
-    def stats(self) -> WorkerStats:
-        with self._lock:
-            return WorkerStats(self._processed, self._failed, self._cpu, tuple(self._lat))
-
-    def _loop(self) -> None:
-        while True:
-            item = self._queue.get(timeout=0.5)
-            if item is None:
-                if self._queue.closed:
-                    return
-                continue
-            c0 = time.thread_time()
-            try:
-                result = self._fn(item)
-            except Exception as exc:  # reported, counted; the thread must keep running
-                with self._lock:
-                    self._failed += 1
-                if self._on_error is not None:
-                    self._on_error(item, exc)
-            else:
-                self._on_result(item, result)
-            with self._lock:
-                self._processed += 1
-                self._cpu += time.thread_time() - c0
-                if self._latency_of is not None:
-                    self._lat.append(time.monotonic() - self._latency_of(item))
-
