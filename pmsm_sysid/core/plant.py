@@ -346,11 +346,22 @@ def plant_to_dict(p: Plant) -> dict[str, Any]:
     return out
 
 
+def packaged_plant_path(name: str) -> Path:
+    """Path of a plant file shipped in the package (``nominal`` = Table 1, effects off)."""
+    return Path(__file__).resolve().parent.parent / "data" / f"{name}.yaml"
+
+
 def load_plant(path: str | Path) -> Plant:
-    """Read and validate a YAML plant file; any problem is one :class:`PlantError` line."""
+    """Read and validate a YAML plant file; any problem is one :class:`PlantError` line.
+
+    A bare name without a file of that name (``nominal``) means the packaged plant file.
+    """
     import yaml
 
     p = Path(path)
+    if not p.exists() and p.suffix == "" and p.parent == Path("."):
+        packaged = packaged_plant_path(p.name)
+        p = packaged if packaged.is_file() else p
     try:
         text = p.read_text()
     except FileNotFoundError as exc:
