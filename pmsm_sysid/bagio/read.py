@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from .. import topics as tp
-from ..core.align import align_streams
+from ..core.align import align_streams, robust_period
 from ..core.errors import BagError
 from .common import LoadedRecording, RawMessage, open_reader, typestore
 
@@ -183,7 +183,7 @@ def read_recording(
                                 source=str(path))
     # The wire carries integer nanoseconds: read the rate from them (500 Hz, not 499.9999...).
     ns = np.round(rec.t * 1e9).astype(np.int64)
-    rate = 1e9 / float(np.median(np.diff(ns)))
+    rate = 1e9 / robust_period(ns)
     meta = {k: str(v) for k, v in custom.items()}
     meta.update({"bag": str(path), "input_topics": ",".join(sorted(used))})
     rec = replace(rec, meta=meta, sample_rate_hz=rate)

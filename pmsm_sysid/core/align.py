@@ -2,7 +2,8 @@
 
 One sample is the thrust, speed and position messages that carry the same ``header.stamp``.
 Real recordings jitter, so stamps are matched within a tolerance (default: half the sample
-period, the period being the median step of the position stamps). Nothing is invented:
+period, read from the position stamps by :func:`robust_period`, i.e. the median step refined
+by averaging the steps near it). Nothing is invented:
 
 1. messages with a non-finite stamp or value are dropped (``n_nonfinite``);
 2. each stream is sorted by stamp (stable); a message stamped earlier than one already seen
@@ -144,10 +145,20 @@ def mutual_nearest(r: FloatArray, s: FloatArray, tol: float) -> tuple[IntArray, 
     return ii[mono], jj[mono]
 
 
+def robust_period(t: ArrayLike) -> float:
+    """Sample period of increasing stamps: the mean of the steps within half a median step
+    of the median step. Gaps and stray stamps are left out (as by a median) but quantised
+    jitter averages out (a plain median of steps of 0.99998 and 1.00002 ms is biased)."""
+    steps = np.diff(np.asarray(t, dtype=np.float64))
+    med = float(np.median(steps))
+    typical = steps[np.abs(steps - med) <= 0.5 * med]
+    return float(np.mean(typical)) if len(typical) else med
+
+
 def _period(t: FloatArray, what: str) -> float:
     if len(t) < 2:
         raise DataError(f"{what}: fewer than two usable stamps, cannot read a sample period")
-    dt = float(np.median(np.diff(t)))
+    dt = robust_period(t)
     if not (np.isfinite(dt) and dt > 0):
         raise DataError(f"{what}: cannot read a sample period from the stamps")
     return dt
