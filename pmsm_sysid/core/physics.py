@@ -26,6 +26,7 @@ white process force of the ``noise`` block, drawn once per sample and held. Nume
 
 from __future__ import annotations
 
+import json
 import math
 from collections import deque
 from collections.abc import Callable
@@ -36,12 +37,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import DataError, PlantError
-from .plant import Plant, dump_plant
+from .plant import Plant, plant_to_dict
 from .signals import Recording
 
 FloatArray = NDArray[np.float64]
 
 _MAX_LAG_STEPS = 64
+_MAX_FINE_STEPS = 64
 _HISTORY_MIN = 1024
 
 
@@ -196,6 +198,14 @@ class MotorSimulator:
         self._k += 1
         self._z = self._draw_measurement()
 
+    def set_state(self, position_m: float, speed_mps: float, force_n: float | None = None) -> None:
+        """Overwrite the true state now (e.g. to start from a measured state); ``force_n`` is
+        the lag state (default: the newest command, i.e. a settled lag)."""
+        force = force_n if force_n is not None else self._command(0)
+        if not all(math.isfinite(a) for a in (position_m, speed_mps, force)):
+            raise PlantError("state must be finite")
+        self._x, self._v, self._f = float(position_m), float(speed_mps), float(force)
+
     def set_plant(self, plant: Plant) -> None:
         """Change parameters now, keeping x, v, the lag state, the delay line and the noise."""
         if plant.sample_rate_hz != self._plant.sample_rate_hz:
@@ -221,6 +231,9 @@ class MotorSimulator:
         self._tau = lag.tau_s if lag is not None else 0.0
         self._inv_m = 1.0 / plant.mass_kg
         self._b = plant.viscous_n_per_mps
+        scales = [blk.smoothing_mps for blk in (plant.coulomb_friction, plant.stribeck_friction)
+                  if blk is not None]
+        self._smoothing = min(scales) if scales else 0.0
 
     def _draw_measurement(self) -> tuple[float, float]:
         z = self._rng_meas.standard_normal(2)
@@ -241,30 +254,53 @@ class MotorSimulator:
     def _integrate(self, duration: float, cmd: float, w: float) -> None:
         steps = max(1, math.ceil(duration / self._h - 1e-9))
         h = duration / steps
-        plant, inv_m, b, tau = self._plant, self._inv_m, self._b, self._tau
-        sin, exp, tanh = math.sin, math.exp, math.tanh
-        decay_half = math.exp(-0.5 * h / tau) if tau > 0 else 0.0
         x, v = self._x, self._v
-        f = self._f if tau > 0 else cmd
-
-        def accel(xs: float, vs: float, fs: float) -> float:
-            eff = float(_effects(plant, xs, vs, fs, sin, exp, tanh))
-            return (fs + w - b * vs - eff) * inv_m
-
+        f = self._f if self._tau > 0 else cmd
+        smooth = self._smoothing
         for _ in range(steps):
-            f_mid = cmd + (f - cmd) * decay_half
-            f_end = cmd + (f_mid - cmd) * decay_half
-            a1 = accel(x, v, f)
-            x2, v2 = x + 0.5 * h * v, v + 0.5 * h * a1
-            a2 = accel(x2, v2, f_mid)
-            x3, v3 = x + 0.5 * h * v2, v + 0.5 * h * a2
-            a3 = accel(x3, v3, f_mid)
-            x4, v4 = x + h * v3, v + h * a3
-            a4 = accel(x4, v4, f_end)
-            x += h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
-            v += h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-            f = f_end
+            a1 = self._accel(x, v, f, w)
+            if smooth > 0.0:
+                fine = _fine_steps(v, h * a1, smooth)
+                if fine > 1:
+                    for _ in range(fine):
+                        x, v, f = self._rk4(x, v, f, h / fine, cmd, w, None)
+                    continue
+            x, v, f = self._rk4(x, v, f, h, cmd, w, a1)
         self._x, self._v, self._f = x, v, f
+
+    def _accel(self, x: float, v: float, f: float, w: float) -> float:
+        eff = float(_effects(self._plant, x, v, f, math.sin, math.exp, math.tanh))
+        return (f + w - self._b * v - eff) * self._inv_m
+
+    def _rk4(self, x: float, v: float, f: float, h: float, cmd: float, w: float,
+             a1: float | None) -> tuple[float, float, float]:
+        """One classic RK4 step of (x, v); the lag force follows its exact exponential."""
+        decay_half = math.exp(-0.5 * h / self._tau) if self._tau > 0 else 0.0
+        f_mid = cmd + (f - cmd) * decay_half
+        f_end = cmd + (f_mid - cmd) * decay_half
+        if a1 is None:
+            a1 = self._accel(x, v, f, w)
+        v2 = v + 0.5 * h * a1
+        a2 = self._accel(x + 0.5 * h * v, v2, f_mid, w)
+        v3 = v + 0.5 * h * a2
+        a3 = self._accel(x + 0.5 * h * v2, v3, f_mid, w)
+        v4 = v + h * a3
+        a4 = self._accel(x + h * v3, v4, f_end, w)
+        x_new = x + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
+        v_new = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+        return x_new, v_new, f_end
+
+
+def _fine_steps(v: float, dv: float, smoothing: float) -> int:
+    """Sub-steps for a step that crosses the sign(v) transition faster than it resolves it.
+
+    Near v = 0 (within 5 smoothing scales, or crossing) a step whose speed change ``dv`` spans
+    more than one smoothing scale is split so that each piece changes v by about one scale.
+    """
+    v_end = v + dv
+    if min(abs(v), abs(v_end)) > 5.0 * smoothing and v * v_end > 0:
+        return 1
+    return min(_MAX_FINE_STEPS, max(1, math.ceil(abs(dv) / smoothing)))
 
 
 def _quantise(value: float, step: float) -> float:
@@ -292,7 +328,8 @@ def simulate(plant: Plant, thrust: ArrayLike, seed: int = 0, x0: float = 0.0, v0
         speed[k], position[k] = sim.measure()
         sim.advance(u[k])
     fs = plant.sample_rate_hz
-    meta = {"plant": dump_plant(plant), "seed": str(seed), "simulator": "pmsm_sysid.physics"}
+    meta = {"plant": json.dumps(plant_to_dict(plant), sort_keys=True), "seed": str(seed),
+            "simulator": "pmsm_sysid.core.physics"}
     return Recording(t=t0 + np.arange(n) / fs, thrust=u.copy(), speed=speed,
                      position=position, sample_rate_hz=fs, source="simulate", meta=meta)
 
