@@ -1,0 +1,224 @@
+"""Forward regression with orthogonal least squares (FROLS) and the ERR of seed Eq. 4.
+
+At step i every remaining candidate p_j is orthogonalised against the terms already chosen,
+w_j = p_j - sum_l (q_l^T p_j) q_l (q_l orthonormal), and the candidate with the largest
+
+    ERR_j = g_j^2 ||w_j||^2 / S,   g_j = w_j^T r / ||w_j||^2,   S = sum_k (y(k) - ybar)^2
+
+is taken (seed Eq. 4; r is the current residual, so g_j^2 ||w_j||^2 = (p_j^T r)^2 / ||w_j||^2).
+Nothing is re-orthogonalised per candidate: two running vectors hold ``a_j = p_j^T r`` and
+``s_j = ||w_j||^2`` and are updated with one projection ``c = P^T q`` per step
+(``s -= c^2``, ``a -= (q^T r) c``), i.e. classical Gram-Schmidt done as BLAS-2/3 updates.
+The chosen column itself is re-orthogonalised twice (CGS2) from its explicit values.
+
+d.c. level (``remove_dc``): the seed removes the mean from y in Eq. 4. Done consistently,
+that is orthogonalising everything against the constant first, so with ``remove_dc`` the
+constant is always in the model (first, ERR 0: it explains no variance about the mean), y
+and all candidates are centred, and the ERR values of the selected terms sum exactly to the
+explained variance 1 - SSE/S of the final least-squares fit. With ``remove_dc=False`` the
+constant is an ordinary candidate and S = sum y^2 (the convention of Billings' book and of
+SysIdentPy, whose FROLS then chooses the same terms in the same order).
+
+Dependence: a candidate whose orthogonalised norm falls below ``DEPENDENCE_TOL`` times its
+original squared norm (||w_j||^2 <= 1e-10 ||p_j||^2) is skipped, never divided by.
+Exact ties are broken by the lowest candidate index (``argmax`` takes the first).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import IdentificationError
+from .regressors import Projector
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+DEPENDENCE_TOL = 1e-10
+CRITERIA = ("terms", "err", "aic", "bic")
+
+
+@dataclass(frozen=True)
+class OfrResult:
+    """Selected candidates in order, with the ERR of each and the residual path."""
+
+    selected: IntArray  # candidate indices, forced terms first
+    err: FloatArray  # ERR of each selected term (0 for the forced constant)
+    sse: FloatArray  # residual sum of squares of the nested models, see ``sizes``
+    sst: float  # denominator of ERR
+    remove_dc: bool
+    n_forced: int
+    n_skipped: int  # candidates skipped as numerically dependent when selection ended
+
+    @property
+    def n_params(self) -> int:
+        return len(self.selected)
+
+    @property
+    def sizes(self) -> IntArray:
+        """Number of parameters of the model whose SSE is ``sse[i]`` (sse[0] = sst)."""
+        return np.arange(len(self.sse), dtype=np.intp) + (1 if self.remove_dc else 0)
+
+
+@dataclass
+class _State:
+    """Running quantities of one forward regression."""
+
+    a: FloatArray  # p_j^T r
+    s: FloatArray  # ||w_j||^2
+    ref: FloatArray  # ||p_j||^2 (threshold reference)
+    usable: NDArray[np.bool_]
+    r: FloatArray
+    q: FloatArray  # (rows, capacity) orthonormal basis of the chosen terms
+    n_q: int = 0
+
+
+def _start(proj: Projector, y: FloatArray, remove_dc: bool, capacity: int) -> _State:
+    ref = proj.norms2()
+    if remove_dc:
+        sums = proj.project(np.ones_like(y))
+        s = ref - sums * (sums / len(y))
+        r = y - y.mean()
+    else:
+        s, r = ref.copy(), y.copy()
+    a = proj.project(r)
+    usable = s > DEPENDENCE_TOL * ref
+    q = np.empty((len(y), capacity), dtype=np.float64, order="F")
+    return _State(a=a, s=s, ref=ref, usable=usable, r=r, q=q)
+
+
+def _orthonormal(st: _State, w: FloatArray) -> tuple[FloatArray, float]:
+    """Re-orthogonalise w against the chosen basis twice (CGS2); return q and ||w||^2."""
+    basis = st.q[:, : st.n_q]
+    for _ in range(2):
+        if st.n_q:
+            w = w - basis @ (basis.T @ w)
+    nw2 = float(w @ w)
+    return w / np.sqrt(nw2) if nw2 > 0 else w, nw2
+
+
+def _take(proj: Projector, st: _State, j: int, remove_dc: bool) -> float | None:
+    """Add candidate j to the basis; return q^T r (None if it proved dependent)."""
+    w = proj.columns(np.array([j], dtype=np.intp))[:, 0]
+    if remove_dc:
+        w = w - w.mean()
+    st.usable[j] = False
+    q, nw2 = _orthonormal(st, w)
+    if not nw2 > DEPENDENCE_TOL * st.ref[j]:
+        return None
+    g = float(q @ st.r)
+    st.r -= g * q
+    st.q[:, st.n_q] = q
+    st.n_q += 1
+    c = proj.project(q)
+    st.s -= c * c
+    st.a -= g * c
+    st.usable &= st.s > DEPENDENCE_TOL * st.ref
+    return g
+
+
+def _best(st: _State) -> int | None:
+    crit = np.full(len(st.a), -1.0)
+    np.divide(st.a * st.a, st.s, out=crit, where=st.usable)
+    j = int(np.argmax(crit))
+    return j if crit[j] > 0 else None
+
+
+def frols(
+    proj: Projector,
+    y: FloatArray,
+    n_terms: int,
+    *,
+    remove_dc: bool = True,
+    constant_index: int | None = 0,
+    rho: float | None = None,
+    forced: Sequence[int] = (),
+) -> OfrResult:
+    """Select up to ``n_terms`` candidates by largest ERR (seed Eq. 4).
+
+    ``y`` is the regression target aligned with the projector's rows. With ``remove_dc`` the
+    constant (``constant_index``, required) is forced first. ``forced`` candidates are taken
+    next in the given order (used by iOFR). ``rho`` stops early once 1 - sum(ERR) < rho.
+    """
+    y = np.asarray(y, dtype=np.float64)
+    if remove_dc and constant_index is None:
+        raise IdentificationError("removing the d.c. level needs a constant candidate")
+    if n_terms < 1:
+        raise IdentificationError(f"need at least one term (got {n_terms})")
+    forced = [int(j) for j in forced]
+    st = _start(proj, y, remove_dc, min(len(forced) + n_terms, proj.n_candidates, len(y)))
+    sst = float(st.r @ st.r)
+    if not sst > 0:
+        raise IdentificationError("the output is constant: nothing to explain")
+    selected: list[int] = []
+    err: list[float] = []
+    sse = [sst]
+    if remove_dc:  # the d.c. level: centring already removed it (no basis vector)
+        st.usable[constant_index] = False
+        selected.append(int(constant_index))  # type: ignore[arg-type]
+        err.append(0.0)
+    for j in forced:
+        g = _take(proj, st, j, remove_dc)
+        if g is None:
+            raise IdentificationError(f"forced candidate {j} is linearly dependent")
+        selected.append(j)
+        err.append(g * g / sst)
+        sse.append(float(st.r @ st.r))
+    n_first = len(selected)
+    while len(selected) - n_first < n_terms and st.n_q < st.q.shape[1]:
+        if rho is not None and len(selected) > n_first and 1.0 - sum(err) < rho:
+            break
+        best = _best(st)
+        if best is None:
+            break
+        g = _take(proj, st, best, remove_dc)
+        if g is None:
+            continue
+        selected.append(best)
+        err.append(g * g / sst)
+        sse.append(float(st.r @ st.r))
+    return OfrResult(
+        selected=np.array(selected, dtype=np.intp), err=np.array(err), sse=np.array(sse),
+        sst=sst, remove_dc=remove_dc, n_forced=n_first,
+        n_skipped=int(np.count_nonzero(~st.usable)) - len(selected),
+    )
+
+
+def information_criterion(sse: FloatArray, n_obs: int, n_params: IntArray, kind: str) -> FloatArray:
+    """AIC = N ln(SSE/N) + 2p, BIC = N ln(SSE/N) + p ln N, for each model size."""
+    if kind not in ("aic", "bic"):
+        raise IdentificationError(f"unknown information criterion '{kind}' (aic, bic)")
+    penalty = 2.0 if kind == "aic" else float(np.log(n_obs))
+    out: FloatArray = n_obs * np.log(np.maximum(sse, 1e-300) / n_obs) + penalty * n_params
+    return out
+
+
+@dataclass(frozen=True)
+class LsFit:
+    """Least-squares estimates of y = X theta with standard deviations."""
+
+    theta: FloatArray
+    std: FloatArray
+    sse: float
+    residuals: FloatArray
+
+
+def least_squares(x: FloatArray, y: FloatArray) -> LsFit:
+    """theta by Householder QR; std = sqrt(sigma^2 diag((X^T X)^-1)), sigma^2 = SSE/(N-p)."""
+    n, p = x.shape
+    if n <= p:
+        raise IdentificationError(f"{p} terms need more than {p} samples (got {n})")
+    qmat, rmat = np.linalg.qr(x)
+    diag = np.abs(np.diag(rmat))
+    if not np.all(diag > 1e-13 * max(float(diag.max()), 1e-300)):
+        raise IdentificationError("selected terms are linearly dependent")
+    theta = np.linalg.solve(rmat, qmat.T @ y)
+    res = y - x @ theta
+    sse = float(res @ res)
+    rinv = np.linalg.solve(rmat, np.eye(p))
+    std = np.sqrt(sse / (n - p) * np.einsum("ij,ij->i", rinv, rinv))
+    return LsFit(theta=theta, std=std, sse=sse, residuals=res)
