@@ -8,8 +8,11 @@
   release": input near f0 is amplified and mixed to other frequencies) and f1 + f2 = +-f0
   ("resonance / energy transfer": pairs of inputs summing to f0 are moved to f0). A line is
   scored by the *median* of 20 log10 |H2| along it (over the whole torus of frequencies), so a
-  crossing ridge does not lift it; ridges are the maxima of that score over f0 in [0, 0.5]
-  that stand ``min_prominence_db`` above their neighbourhood. H2_sym is symmetric, so the
+  crossing ridge does not lift it; ridges are the local maxima of that score over f0 in
+  [0, 0.5] that stand ``min_prominence_db`` (6 dB) above the median score of the family (so
+  a notch nearby does not make an ordinary line a ridge), located on a 251-point scan and
+  refined to 2e-4 cycles/sample; ``dominant`` marks ridges within 20 dB of the strongest
+  ridge of the same order. H2_sym is symmetric, so the
   f2 ridges mirror the f1 ridges; a real model's GFRFs satisfy H(-f) = conj H(f), so every
   ridge at +f0 has its twin at -f0 (both are listed, ``sign`` = +1 / -1).
 * **H3 ridges** on the seed's slice f1 = f3 (Fig. 14): lines f1 = f3 = c ("f1"; named
@@ -20,7 +23,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,6 +34,7 @@ from .gfrf import Gfrf
 FloatArray = NDArray[np.float64]
 LineFn = Callable[[FloatArray, FloatArray], tuple[FloatArray, ...]]
 TINY = 1e-300
+DOMINANT_DB = 20.0
 
 
 @dataclass(frozen=True)
@@ -70,7 +74,8 @@ class Ridge:
     freq_norm: float
     freq_hz: float
     level_db: float         # median of 20 log10 |H_n| along the line
-    prominence_db: float
+    prominence_db: float    # level_db above the median level of all lines of its family
+    dominant: bool = True   # level_db within DOMINANT_DB of the strongest ridge of its order
 
 
 def poles(g: Gfrf) -> list[Pole]:
@@ -134,18 +139,23 @@ def _line_score(g: Gfrf, line: LineFn, c: FloatArray, n_along: int) -> FloatArra
 
 
 def _family_ridges(g: Gfrf, order: int, kind: str, line: LineFn, n_c: int, n_along: int,
-                   min_prom: float) -> list[Ridge]:
+                   min_excess: float) -> list[Ridge]:
+    """Lines of one family whose score is a local maximum standing ``min_excess`` dB above
+    the family's median score (a notch elsewhere does not make an ordinary line a ridge)."""
     c = np.linspace(0.0, 0.5, n_c)
     score = _line_score(g, line, c, n_along)
+    base = float(np.median(score))
     step = c[1] - c[0]
     out: list[Ridge] = []
-    for j, prom in _mirror_peaks(score, min_prom):
+    for j, _ in _mirror_peaks(score, 0.5):
+        if score[j] - base < min_excess:
+            continue
         fine = np.clip(np.linspace(c[j] - step, c[j] + step, 21), 0.0, 0.5)
         fs = _line_score(g, line, fine, n_along)
         k = int(np.argmax(fs))
-        f0 = float(fine[k])
+        f0, level = float(fine[k]), float(fs[k])
         for sign in (1, -1) if 0.0 < f0 < 0.5 else (1,):
-            out.append(Ridge(order, kind, sign, f0, f0 * g.sample_rate_hz, float(fs[k]), prom))
+            out.append(Ridge(order, kind, sign, f0, f0 * g.sample_rate_hz, level, level - base))
     return out
 
 
@@ -176,8 +186,7 @@ def h2_ridges(g: Gfrf, n_c: int = 251, n_along: int = 128,
     if _is_zero(g, 2):
         return []
     f1 = _family_ridges(g, 2, "f1", H2_LINES["f1"], n_c, n_along, min_prominence_db)
-    f2 = [Ridge(2, "f2", r.sign, r.freq_norm, r.freq_hz, r.level_db, r.prominence_db)
-          for r in f1]
+    f2 = [replace(r, kind="f2") for r in f1]
     fs = _family_ridges(g, 2, "f1+f2", H2_LINES["f1+f2"], n_c, n_along, min_prominence_db)
     return _sorted(f1 + f2 + fs)
 
@@ -195,11 +204,13 @@ def h3_ridges(g: Gfrf, n_c: int = 251, n_along: int = 96, min_prominence_db: flo
                 d1 = min(abs(r.freq_norm - p) for p in h1_peak_norm)
                 d2 = min(abs(2 * r.freq_norm - p) for p in h1_peak_norm)
                 if d2 < d1 and d2 <= tol:
-                    r = Ridge(3, "f1+f3", r.sign, 2 * r.freq_norm, 2 * r.freq_hz, r.level_db,
-                              r.prominence_db)
+                    r = replace(r, kind="f1+f3", freq_norm=2 * r.freq_norm,
+                                freq_hz=2 * r.freq_hz)
             out.append(r)
     return _sorted(out)
 
 
 def _sorted(rs: list[Ridge]) -> list[Ridge]:
+    top = max((r.level_db for r in rs), default=0.0)
+    rs = [replace(r, dominant=r.level_db >= top - DOMINANT_DB) for r in rs]
     return sorted(rs, key=lambda r: (-r.level_db, r.kind, -r.sign))
