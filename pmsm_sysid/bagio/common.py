@@ -107,7 +107,7 @@ def storage_plugin(storage: str) -> StoragePlugin:
 
 
 def _reason(exc: BaseException) -> str:
-    text = str(exc).strip() or type(exc).__name__
+    text = " ".join(str(exc).split()) or type(exc).__name__  # one line, always
     return text[:-1] if text.endswith(".") else text
 
 
@@ -150,10 +150,15 @@ def _explain(path: Path, exc: Exception) -> str:
     text = _reason(exc)
     if isinstance(exc, FileNotFoundError) and "metadata" in text:
         stores = sorted(p.name for p in path.glob("*") if p.suffix in (".mcap", ".db3"))
-        if stores:
+        if any(name.endswith(".db3") for name in stores):
             return (f"no metadata.yaml beside {', '.join(stores)}: not finalised; "
                     "repair it with `python -m pmsm_sysid.bagio repair BAG`")
+        if stores:
+            return (f"no metadata.yaml beside {', '.join(stores)}: not finalised "
+                    "(an .mcap killed while recording cannot be repaired here)")
         return "not a rosbag2 directory (no metadata.yaml)"
+    if "files are missing" in text:
+        return f"storage file(s) listed in metadata.yaml are missing ({text})"
     if "Storage plugin" in text:
         return f"unknown storage plugin in metadata.yaml ({text}); expected mcap or sqlite3"
     if "metadata" in text.lower() or "YAML" in text:

@@ -97,6 +97,8 @@ class BagRecorder:
         self._closed = False
         self._last_flush = time.monotonic()
         self.messages_written = 0
+        #: messages durable on disk and listed in metadata.yaml (as of the last flush)
+        self.messages_flushed = 0
         atexit.register(self.close)
         with self._lock:
             self._flush_locked()
@@ -145,6 +147,7 @@ class BagRecorder:
                     self._sqlite.commit()
                     self._sqlite.execute("PRAGMA journal_mode=DELETE")
                 self._writer.close()
+                self.messages_flushed = self.messages_written
             except Exception as exc:
                 raise BagError(f"{self.path}: cannot finalise bag ({exc})") from exc
 
@@ -169,6 +172,7 @@ class BagRecorder:
                 storage.close_chunk()
                 storage.bio.flush()
             write_metadata(self.path, self._metadata())
+            self.messages_flushed = self.messages_written
         except SysIdError:
             raise
         except Exception as exc:
