@@ -10,13 +10,16 @@ Mechanical equation, integrated with fixed-step RK4::
 white process force of the ``noise`` block, drawn once per sample and held. Numerical choices:
 
 * The lag state is integrated in closed form inside each sub-step (the command is constant
-  there), so a short lag such as the winding constant L/R = 0.41 ms never makes RK4 unstable;
-  RK4 integrates (x, v) with that exact force trajectory at its stage times.
-* ``plant.substeps`` is the minimum number of RK4 steps per sample (default 8: 0.25 ms at
-  500 Hz, 0.6 L/R). The simulator raises it when an effect is stiff, so that h*lambda <= 1
+  there): F(t) = F_cmd + d exp(-t/tau). The damped mass's linear response phi(t) to that
+  transient is taken in closed form too (RK4 carries v - phi), so a lag of any length, such
+  as the winding constant L/R = 0.41 ms, neither destabilises RK4 nor needs smaller steps.
+* ``plant.substeps`` is the minimum number of RK4 steps per sample (default 8: h = 0.25 ms
+  at 500 Hz, 0.6 L/R). The simulator raises it when an effect is stiff, so that h*lambda <= 1
   for the fastest mode (viscous B/M, smoothed friction Fc/(M v_s), spring/cogging
-  sqrt(k/M)) and h <= tau for the lag (capped at 64 steps: a shorter lag's transient is
-  then below 1e-5 of a sample's impulse).
+  sqrt(k/M)).
+* Near v = 0 a step is split (up to 64 pieces) so that each piece changes v by at most one
+  smoothing scale of sign(v) and h * (friction slope / M) <= 0.2: velocity reversals and
+  rests are resolved.
 * sign(v) is ``tanh(v / smoothing_mps)`` (default 1 mm/s): smooth, so RK4 keeps its order;
   a body left to rest under a force below the friction level creeps at about
   ``smoothing_mps * atanh(F/Fc)`` instead of sticking.
@@ -42,8 +45,8 @@ from .signals import Recording
 
 FloatArray = NDArray[np.float64]
 
-_MAX_LAG_STEPS = 64
 _MAX_FINE_STEPS = 64
+_NEAR_ZERO_HLAMBDA = 0.2
 _HISTORY_MIN = 1024
 
 
@@ -88,33 +91,34 @@ def effects_force(plant: Plant, x: ArrayLike, v: ArrayLike, f_applied: ArrayLike
                       dtype=np.float64).copy()
 
 
-def stiff_rate(plant: Plant) -> float:
-    """Fastest mechanical rate (1/s) that bounds the RK4 step: max of B/M, friction, springs."""
-    m = plant.mass_kg
-    rates = [plant.viscous_n_per_mps / m]
+def friction_rate(plant: Plant) -> float:
+    """Largest rate (1/s) of the smoothed friction near v = 0: d(F_friction)/dv / M."""
+    slope = 0.0
     if plant.coulomb_friction is not None:
         cf = plant.coulomb_friction
-        rates.append(abs(cf.amplitude_n) / (m * cf.smoothing_mps))
+        slope += abs(cf.amplitude_n) / cf.smoothing_mps
     if plant.stribeck_friction is not None:
         sf = plant.stribeck_friction
-        rates.append(sf.static_n / (m * min(sf.smoothing_mps, sf.velocity_mps)))
-    if plant.spring is not None:
-        rates.append(math.sqrt(plant.spring.stiffness_n_per_m / m))
+        slope += sf.static_n / min(sf.smoothing_mps, sf.velocity_mps)
+    return slope / plant.mass_kg
+
+
+def stiff_rate(plant: Plant) -> float:
+    """Fastest mechanical rate (1/s) that bounds the RK4 step: damping plus friction
+    slope, or the stiffness of springs and cogging."""
+    m = plant.mass_kg
+    stiffness = plant.spring.stiffness_n_per_m if plant.spring is not None else 0.0
     if plant.cogging is not None:
         cog = plant.cogging
         grad = abs(cog.amplitude_n) + sum(h.order * abs(h.amplitude_n) for h in cog.harmonics)
-        rates.append(math.sqrt(2.0 * math.pi * grad / (cog.pitch_m * m)))
-    return max(rates)
+        stiffness += 2.0 * math.pi * grad / cog.pitch_m
+    return max(plant.viscous_n_per_mps / m + friction_rate(plant), math.sqrt(stiffness / m))
 
 
 def effective_substeps(plant: Plant) -> int:
     """RK4 steps per sample actually used: ``plant.substeps`` raised for stiff effects."""
     period = plant.sample_period_s
-    n = max(plant.substeps, math.ceil(period * stiff_rate(plant) - 1e-12))
-    lag = plant.thrust_lag
-    if lag is not None and lag.tau_s > 0:
-        n = max(n, min(_MAX_LAG_STEPS, math.ceil(period / lag.tau_s - 1e-12)))
-    return int(n)
+    return int(max(plant.substeps, math.ceil(period * stiff_rate(plant) - 1e-12)))
 
 
 @dataclass(frozen=True)
@@ -234,6 +238,7 @@ class MotorSimulator:
         scales = [blk.smoothing_mps for blk in (plant.coulomb_friction, plant.stribeck_friction)
                   if blk is not None]
         self._smoothing = min(scales) if scales else 0.0
+        self._fric_rate = friction_rate(plant)
 
     def _draw_measurement(self) -> tuple[float, float]:
         z = self._rng_meas.standard_normal(2)
@@ -260,7 +265,8 @@ class MotorSimulator:
         for _ in range(steps):
             a1 = self._accel(x, v, f, w)
             if smooth > 0.0:
-                fine = _fine_steps(v, h * a1, smooth)
+                dv = h * (a1 - (f - cmd) * self._inv_m) + self._lag_impulse(f - cmd, h)
+                fine = _fine_steps(v, dv, smooth, h * self._fric_rate)
                 if fine > 1:
                     for _ in range(fine):
                         x, v, f = self._rk4(x, v, f, h / fine, cmd, w, None)
@@ -272,35 +278,55 @@ class MotorSimulator:
         eff = float(_effects(self._plant, x, v, f, math.sin, math.exp, math.tanh))
         return (f + w - self._b * v - eff) * self._inv_m
 
+    def _lag_impulse(self, d: float, s: float) -> float:
+        """phi(s): speed response of the damped mass to the lag transient d exp(-t/tau).
+
+        phi' = -(B/M) phi + d exp(-t/tau)/M, phi(0) = 0, in closed form.
+        """
+        if d == 0.0 or self._tau <= 0.0:
+            return 0.0
+        lam = self._b * self._inv_m
+        kappa = 1.0 / self._tau - lam
+        shape = s if abs(kappa * s) < 1e-300 else -math.expm1(-kappa * s) / kappa
+        return d * self._inv_m * math.exp(-lam * s) * shape
+
     def _rk4(self, x: float, v: float, f: float, h: float, cmd: float, w: float,
              a1: float | None) -> tuple[float, float, float]:
-        """One classic RK4 step of (x, v); the lag force follows its exact exponential."""
+        """One RK4 step of (x, v) with the lag force F(t) = cmd + d exp(-t/tau) exact.
+
+        The linear response phi(t) of the damper to the lag transient is taken in closed
+        form and RK4 integrates the rest (it carries v - phi), so only smooth terms meet the
+        quadrature and a lag of any length costs no accuracy. Without a lag d = 0 and this
+        is classic RK4.
+        """
+        d = f - cmd
         decay_half = math.exp(-0.5 * h / self._tau) if self._tau > 0 else 0.0
-        f_mid = cmd + (f - cmd) * decay_half
-        f_end = cmd + (f_mid - cmd) * decay_half
-        if a1 is None:
-            a1 = self._accel(x, v, f, w)
-        v2 = v + 0.5 * h * a1
-        a2 = self._accel(x + 0.5 * h * v, v2, f_mid, w)
-        v3 = v + 0.5 * h * a2
-        a3 = self._accel(x + 0.5 * h * v2, v3, f_mid, w)
-        v4 = v + h * a3
-        a4 = self._accel(x + h * v3, v4, f_end, w)
+        f_mid = cmd + d * decay_half
+        f_end = cmd + d * decay_half * decay_half
+        phi_mid, phi_end = self._lag_impulse(d, 0.5 * h), self._lag_impulse(d, h)
+        inv_m, lam = self._inv_m, self._b * self._inv_m
+        mid_fix = lam * phi_mid - (f_mid - cmd) * inv_m
+        k1 = (self._accel(x, v, f, w) if a1 is None else a1) - d * inv_m
+        v2 = v + 0.5 * h * k1 + phi_mid
+        k2 = self._accel(x + 0.5 * h * v, v2, f_mid, w) + mid_fix
+        v3 = v + 0.5 * h * k2 + phi_mid
+        k3 = self._accel(x + 0.5 * h * v2, v3, f_mid, w) + mid_fix
+        v4 = v + h * k3 + phi_end
+        k4 = self._accel(x + h * v3, v4, f_end, w) + lam * phi_end - (f_end - cmd) * inv_m
         x_new = x + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
-        v_new = v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+        v_new = v + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4) + phi_end
         return x_new, v_new, f_end
 
 
-def _fine_steps(v: float, dv: float, smoothing: float) -> int:
-    """Sub-steps for a step that crosses the sign(v) transition faster than it resolves it.
-
-    Near v = 0 (within 5 smoothing scales, or crossing) a step whose speed change ``dv`` spans
-    more than one smoothing scale is split so that each piece changes v by about one scale.
-    """
+def _fine_steps(v: float, dv: float, smoothing: float, h_rate: float) -> int:
+    """Sub-steps for a step near the sign(v) transition (within 5 smoothing scales, or
+    crossing v = 0): pieces that change v by at most one smoothing scale and keep
+    h * (friction rate) <= 0.2, where the smoothed friction is stiff."""
     v_end = v + dv
     if min(abs(v), abs(v_end)) > 5.0 * smoothing and v * v_end > 0:
         return 1
-    return min(_MAX_FINE_STEPS, max(1, math.ceil(abs(dv) / smoothing)))
+    need = max(abs(dv) / smoothing, h_rate / _NEAR_ZERO_HLAMBDA)
+    return min(_MAX_FINE_STEPS, max(1, math.ceil(need)))
 
 
 def _quantise(value: float, step: float) -> float:
