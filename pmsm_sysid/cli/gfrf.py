@@ -1,0 +1,141 @@
+"""``pmsm-sysid gfrf MODEL``: GFRFs, H1 peaks, H2/H3 ridges and poles of an identified model.
+
+MODEL is the JSON written by ``identify`` (or a ``run --json`` summary, whose ``last_model``
+is used). Frequencies are normalised, in cycles/sample (Hz = f x sample rate). ``--at``
+evaluates the symmetric H_n at one point (n = number of frequencies, 1..4) and is repeatable;
+``--grid N`` adds H1 on N points and |H2|, |H3(f1, f2, f1)| on N x N grids (dB) to the JSON.
+When the model JSON carries the ``excitation`` summary of its estimation input, every peak and
+ridge is marked ``supported`` or not, with a note (see docs/frequency.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from typing import Any, TextIO
+
+from .common import read_json, write_json
+
+HELP = "GFRFs, H1 peaks, H2/H3 ridges and poles of an identified model (identify JSON)"
+MAX_ORDER = 4
+
+
+def _point(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(x) for x in text.replace(" ", "").split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(
+            f"expected 'f1[,f2[,f3[,f4]]]' in cycles/sample, got '{text}'") from exc
+    if not 1 <= len(values) <= MAX_ORDER:
+        raise argparse.ArgumentTypeError(f"1 to {MAX_ORDER} frequencies per point, got '{text}'")
+    for v in values:
+        if not math.isfinite(v) or abs(v) > 0.5:
+            raise argparse.ArgumentTypeError(
+                f"normalised frequencies must be finite and within [-0.5, 0.5] (cycles/sample), "
+                f"got '{text}'")
+    return values
+
+
+def _grid(text: str) -> int:
+    from ..core.gfrf_analysis import MAX_REPORT_GRID
+
+    try:
+        n = int(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected an integer, got '{text}'") from exc
+    if not 2 <= n <= MAX_REPORT_GRID:
+        raise argparse.ArgumentTypeError(
+            f"grid must be 2..{MAX_REPORT_GRID} points per axis (got {n}): larger grids make "
+            "JSON files of tens of MB; use the Python API for those")
+    return n
+
+
+def _orders(text: str) -> tuple[int, ...]:
+    try:
+        out = tuple(sorted({int(x) for x in text.split(",")}))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected e.g. '1,2,3', got '{text}'") from exc
+    if not out or any(o not in (1, 2, 3) for o in out):
+        raise argparse.ArgumentTypeError(f"orders are among 1, 2, 3, got '{text}'")
+    return out
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("model", metavar="MODEL", help="model JSON from 'identify' ('-' = stdin)")
+    p.add_argument("--at", type=_point, action="append", default=[], metavar="F1[,F2[,F3]]",
+                   help="evaluate H_n^sym at these normalised frequencies (repeatable)")
+    p.add_argument("--grid", type=_grid, metavar="N",
+                   help="add H1, |H2| and the H3 slice f1 = f3 on N-point grids to the JSON")
+    p.add_argument("--orders", type=_orders, default=(1, 2, 3), metavar="1,2,3",
+                   help="which GFRFs to search for peaks/ridges (default 1,2,3)")
+    p.add_argument("--json", metavar="FILE", help="write the gfrf JSON ('-' = stdout)")
+
+
+def _load(path: str) -> Any:
+    import json
+
+    from ..core.errors import DataError, GfrfError
+
+    if path == "-":
+        try:
+            d = json.loads(sys.stdin.read())
+        except ValueError as exc:
+            raise DataError(f"stdin: not readable JSON ({exc})") from exc
+    else:
+        d = read_json(path)
+    if isinstance(d, dict) and "terms" not in d and isinstance(d.get("last_model"), dict):
+        d = d["last_model"]
+    if not isinstance(d, dict) or "terms" not in d:
+        raise GfrfError(f"{path}: not a model JSON (no 'terms'; expected the output of identify)")
+    return d
+
+
+def _print(res: dict[str, Any], out: TextIO) -> None:
+    fs = res["sample_rate_hz"]
+    radius = res["max_pole_radius"]
+    print(f"linear part: {'stable' if res['stable'] else 'UNSTABLE'}, "
+          f"{len(res['poles'])} poles, largest radius {radius:.4f} ({fs:g} Hz sampling)", file=out)
+    for w in res["warnings"]:
+        print(f"warning: {w}", file=out)
+    print(f"identifiability: {res['identifiability']['rests_on']}", file=out)
+
+    def mark(row: dict[str, Any]) -> str:
+        return {True: "supported", False: "NOT supported", None: "unchecked"}[row["supported"]]
+
+    print("H1 peaks:" if res["h1"]["peaks"] else "H1 peaks: none", file=out)
+    for p in res["h1"]["peaks"]:
+        print(f"  {p['kind']:<9} {p['freq_norm']:.4f} cyc/sample = {p['freq_hz']:7.2f} Hz  "
+              f"{p['gain_db']:7.2f} dB  {p['phase_deg']:8.2f} deg  [{mark(p)}]", file=out)
+    for order in ("h2", "h3"):
+        block = res[order]
+        ridges = [r for r in block["ridges"] if r["sign"] > 0]
+        label = order.upper() + (" ridges (slice f1 = f3)" if order == "h3" else " ridges")
+        if block.get("zero"):
+            print(f"{label}: none ({block['note']})", file=out)
+            continue
+        print(f"{label}:" if ridges else f"{label}: none", file=out)
+        for r in ridges:
+            print(f"  {r['kind']:<9} = +-{r['freq_norm']:.4f} cyc/sample = +-{r['freq_hz']:7.2f} Hz"
+                  f"  level {r['level_db']:7.2f} dB  [{mark(r)}]", file=out)
+    for e in res["eval"]:
+        args = ", ".join(f"{f:g}" for f in e["f"])
+        gain = "-inf" if e["gain_db"] is None else f"{e['gain_db']:.3f}"
+        print(f"H{e['order']}({args}) = {e['h'][0]:.6g} {e['h'][1]:+.6g}j  "
+              f"({gain} dB, {e['phase_deg']:.2f} deg)", file=out)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..core.errors import DataError, GfrfError, IdentificationError
+    from ..core.gfrf_analysis import analyse_json
+
+    d = _load(args.model)
+    try:
+        res = analyse_json(d, at=args.at, grid=args.grid, orders=args.orders).to_dict()
+    except IdentificationError as exc:
+        raise GfrfError(f"{args.model}: {exc}") from exc
+    except DataError as exc:
+        raise GfrfError(f"{args.model}: bad 'excitation' block: {exc}") from exc
+    _print(res, sys.stderr if args.json == "-" else sys.stdout)
+    write_json(res, args.json)
+    return 0
