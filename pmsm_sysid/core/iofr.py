@@ -71,6 +71,11 @@ class _Problem:
         c = self.proj.columns(np.array(free, dtype=np.intp))
         return c - c.mean(axis=0) if self.remove_dc else c
 
+    def sse(self, free: list[int]) -> float:
+        q, _ = np.linalg.qr(self.cols(free))
+        r = self.t - q @ (q.T @ self.t)
+        return float(r @ r)
+
     def swaps(self, free: list[int]) -> _Swaps:
         q, rmat = np.linalg.qr(self.cols(free))
         if np.any(np.abs(np.diag(rmat)) <= 1e-12 * np.abs(np.diag(rmat)).max()):
@@ -140,6 +145,39 @@ class IofrResult:
     n_resizes: int
 
 
+def _truncate(res: OfrResult, n_free: int) -> OfrResult:
+    """The greedy path cut to ``n_free`` selected terms besides the forced constant."""
+    n_fixed = 1 if res.remove_dc else 0
+    k = min(n_free, len(res.sse) - 1)
+    return OfrResult(selected=res.selected[: n_fixed + k], err=res.err[: n_fixed + k],
+                     sse=res.sse[: k + 1], sst=res.sst, remove_dc=res.remove_dc,
+                     n_forced=res.n_forced, n_skipped=res.n_skipped)
+
+
+def _target_size(path: OfrResult, n_terms: int, criterion: str, rho: float | None,
+                 n_obs: int) -> int:
+    """Number of terms (besides the forced constant) the criterion asks for on the path."""
+    avail = min(n_terms, len(path.sse) - 1)
+    if criterion == "err" and rho is not None:
+        unexplained = path.sse[1 : avail + 1] / path.sst
+        hit = np.flatnonzero(unexplained < rho)
+        return int(hit[0]) + 1 if len(hit) else avail
+    if criterion in ("aic", "bic"):
+        ic = information_criterion(path.sse, n_obs, path.sizes, criterion)[1 : avail + 1]
+        return int(np.argmin(ic)) + 1
+    return avail
+
+
+def _prune(pb: _Problem, free: list[int], size: int) -> list[int]:
+    """Backward elimination: drop the term whose removal raises the SSE least."""
+    while len(free) > max(size, 1):
+        q, rmat = np.linalg.qr(pb.cols(free))
+        rinv = np.linalg.solve(rmat, np.eye(len(free)))
+        vy = (rinv @ (q.T @ pb.t)) / np.linalg.norm(rinv, axis=1)
+        del free[int(np.argmin(vy * vy))]
+    return free
+
+
 def iofr(
     proj: Projector,
     y: FloatArray,
@@ -151,17 +189,24 @@ def iofr(
     rho: float | None = None,
     max_swaps: int = MAX_SWAPS,
 ) -> IofrResult:
-    """FROLS, then exact exchange (and, for AIC/BIC, resizing) until no move helps."""
+    """Over-select by FROLS, prune back, then exchange (and resize for AIC/BIC).
+
+    1. FROLS to twice the wanted size (the path also fixes the size for ``err``/``aic``/
+       ``bic`` exactly as plain FROLS would); 2. backward elimination to the size, dropping
+    each time the term whose removal raises the SSE least; start from that set or from
+    the plain FROLS set of the same size, whichever has the lower SSE (so the result is
+    never worse than FROLS); 3. exact single-term exchanges while one lowers the SSE;
+    4. for AIC/BIC, one-term resizes while they lower the criterion, each followed by
+    exchanges.
+    """
     y = np.asarray(y, dtype=np.float64)
-    greedy = frols(proj, y, n_terms, remove_dc=remove_dc, constant_index=constant_index,
-                   rho=rho if criterion == "err" else None)
+    path = frols(proj, y, 2 * n_terms, remove_dc=remove_dc, constant_index=constant_index)
     n_fixed = 1 if remove_dc else 0
-    free = [int(j) for j in greedy.selected[n_fixed:]]
-    if criterion in ("aic", "bic"):
-        ic = information_criterion(greedy.sse, len(y), greedy.sizes, criterion)
-        keep = int(greedy.sizes[int(np.argmin(ic))]) - n_fixed
-        free = free[: max(keep, 1)]
+    size = _target_size(path, n_terms, criterion, rho, len(y))
     pb = _Problem(proj, y, remove_dc, constant_index)
+    pruned = _prune(pb, [int(j) for j in path.selected[n_fixed : n_fixed + 2 * size]], size)
+    greedy = [int(j) for j in path.selected[n_fixed : n_fixed + size]]
+    free = pruned if pb.sse(pruned) <= path.sse[size] else greedy
     free, n_swaps = _exchange(pb, free, max_swaps)
     n_resizes = 0
     while criterion in ("aic", "bic") and n_resizes < n_terms and n_swaps < max_swaps:
@@ -171,7 +216,8 @@ def iofr(
         free, more = _exchange(pb, free, max_swaps - n_swaps)
         n_swaps += more
     return IofrResult(ofr=_in_err_order(pb, y, free, remove_dc, constant_index),
-                      greedy=greedy, n_swaps=n_swaps, n_resizes=n_resizes)
+                      greedy=_truncate(path, size if criterion == "err" else n_terms),
+                      n_swaps=n_swaps, n_resizes=n_resizes)
 
 
 def _in_err_order(
