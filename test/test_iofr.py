@@ -116,7 +116,7 @@ def test_swap_formula_equals_brute_force_least_squares(remove_dc: bool) -> None:
 
 @pytest.mark.parametrize("seed", range(6))
 def test_iofr_never_worse_than_greedy_at_the_same_size(seed: int) -> None:
-    cs, proj, t = _small(seed)
+    _cs, proj, t = _small(seed)
     for n in (3, 6):
         g = frols(proj, t, n)
         r = iofr(proj, t, n)

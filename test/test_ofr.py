@@ -37,7 +37,7 @@ def naive_greedy(p: np.ndarray, y: np.ndarray, n: int, remove_dc: bool) -> list[
         for j in range(p.shape[1]):
             if j in chosen or j in fixed:
                 continue
-            cols = np.column_stack([*base, p[:, chosen + [j]]])
+            cols = np.column_stack([*base, p[:, [*chosen, j]]])
             s = _sse(cols, y)
             if s < best_sse - 1e-12 * abs(best_sse if np.isfinite(best_sse) else 1.0):
                 best, best_sse = j, s
@@ -57,7 +57,7 @@ def _problem(seed: int = 0, n: int = 300):
 @pytest.mark.parametrize("remove_dc", [True, False])
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_selection_equals_naive_greedy_least_squares(remove_dc: bool, seed: int) -> None:
-    cs, proj, t = _problem(seed)
+    _cs, proj, t = _problem(seed)
     res = frols(proj, t, 6, remove_dc=remove_dc)
     expected = naive_greedy(proj.matrix, t, 6, remove_dc)
     assert res.selected.tolist() == expected
