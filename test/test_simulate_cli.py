@@ -1,0 +1,137 @@
+"""``pmsm-sysid simulate``: bags equal the offline simulation; bad input is one line, exit 2."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pmsm_sysid.bagio import read_recording
+from pmsm_sysid.cli import main
+from pmsm_sysid.cli import simulate as simulate_cli
+from pmsm_sysid.core.excitation import EXCITATIONS, make_excitation
+from pmsm_sysid.core.physics import simulate
+from pmsm_sysid.core.plant import load_plant
+
+REPO = Path(__file__).resolve().parents[1]
+CLI = str(Path(sys.executable).parent / "pmsm-sysid")
+
+
+def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    return subprocess.run([CLI, *args], capture_output=True, text=True, timeout=120, env=env,
+                          cwd=cwd)
+
+
+def assert_one_line_error(proc: subprocess.CompletedProcess[str], fragment: str) -> None:
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert fragment in lines[0]
+
+
+def test_bag_equals_offline_simulation(tmp_path: Path) -> None:
+    bag, summary = tmp_path / "bag", tmp_path / "summary.json"
+    proc = run_cli("simulate", "--plant", str(REPO / "plants" / "cogging.yaml"), "--duration",
+                   "2", "--seed", "4", "--out", str(bag), "--json", str(summary))
+    assert proc.returncode == 0, proc.stderr
+    assert "1000 samples at 500 Hz" in proc.stdout
+    plant = load_plant(REPO / "plants" / "cogging.yaml")
+    want = simulate(plant, make_excitation("paper-speed", 1000, 500.0), seed=4)
+    got = read_recording(bag).recording
+    assert len(got) == 1000
+    for name in ("thrust", "speed", "position"):
+        np.testing.assert_array_equal(got.signal(name), want.signal(name))
+    np.testing.assert_allclose(got.t, want.t, rtol=0, atol=1e-9)
+    assert not got.speed_derived
+    info = json.loads(summary.read_text())
+    assert info["samples"] == 1000 and info["effects"] == ["cogging", "noise"]
+    assert info["plant"]["cogging"]["pitch_m"] == 0.005
+    assert info["realtime_factor"] > 1.0
+    assert info["speed_rms_mps"] == pytest.approx(float(np.std(want.speed)))
+
+
+@pytest.mark.parametrize("kind", ["paper-position", "multisine", "chirp", "prbs", "aprbs"])
+def test_every_excitation_and_sqlite3(tmp_path: Path, kind: str,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    bag = tmp_path / "bag"
+    rc = main(["simulate", "--excitation", kind, "--duration", "1", "--seed", "2", "--out",
+               str(bag), "--storage", "sqlite3", "--amplitude", "12", "--json", "-"])
+    assert rc == 0
+    out = capsys.readouterr()
+    info = json.loads(out.out)            # stdout is pure JSON with --json -
+    assert "wrote" in out.err
+    assert info["excitation"] == kind and info["amplitude_n"] == 12.0
+    assert list(bag.glob("*.db3"))
+    got = read_recording(bag).recording
+    np.testing.assert_array_equal(got.thrust, make_excitation(kind, 500, 500.0, seed=2,
+                                                              amplitude_n=12.0))
+
+
+def test_excitation_options_and_namespace(tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    rc = main(["simulate", "--excitation", "multisine", "--excitation-option", "f_max_hz=20",
+               "--excitation-option", "phases=schroeder", "--duration", "1", "--out", str(bag),
+               "--namespace", "/axis1"])
+    assert rc == 0
+    got = read_recording(bag, namespace="/axis1").recording
+    np.testing.assert_array_equal(got.thrust, make_excitation(
+        "multisine", 500, 500.0, f_max_hz=20, phases="schroeder"))
+
+
+def test_refuses_to_overwrite_unless_forced(tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    assert main(["simulate", "--duration", "0.5", "--out", str(bag)]) == 0
+    before = sorted((p.name, p.stat().st_mtime_ns) for p in bag.iterdir())
+    proc = run_cli("simulate", "--duration", "0.5", "--out", str(bag))
+    assert_one_line_error(proc, "exists already; use --force")
+    assert sorted((p.name, p.stat().st_mtime_ns) for p in bag.iterdir()) == before
+    assert main(["simulate", "--duration", "0.5", "--seed", "1", "--out", str(bag),
+                 "--force", "--plant", str(REPO / "plants" / "nominal_noisy.yaml")]) == 0
+    assert read_recording(bag).recording.meta.get("pmsm_sysid.seed") == "1"
+    plain = tmp_path / "notabag"
+    plain.mkdir()
+    (plain / "precious.txt").write_text("keep me")
+    assert main(["simulate", "--duration", "0.5", "--out", str(plain), "--force"]) == 2
+    assert (plain / "precious.txt").read_text() == "keep me"
+
+
+@pytest.mark.parametrize(("plant_text", "fragment"), [
+    ("mass_kg: 2.0\nviscus_n_per_mps: 30\n",
+     "unknown key 'viscus_n_per_mps' (did you mean 'viscous_n_per_mps'?)"),
+    ("mass_kg: .nan\n", "mass_kg must be finite"),
+    ("cogging: {amplitude_n: 3}\n", "cogging is missing pitch_m"),
+    ("mass_kg: [2\n", "not valid YAML"),
+])
+def test_bad_plant_file_exit_2_one_line(tmp_path: Path, plant_text: str, fragment: str) -> None:
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(plant_text)
+    proc = run_cli("simulate", "--plant", str(plant), "--out", str(tmp_path / "bag"))
+    assert_one_line_error(proc, fragment)
+    assert not (tmp_path / "bag").exists()
+
+
+def test_bad_arguments_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = str(tmp_path / "bag")
+    assert main(["simulate", "--plant", str(tmp_path / "missing.yaml"), "--out", out]) == 2
+    assert "no such plant file" in capsys.readouterr().err
+    assert main(["simulate", "--excitation-option", "f9=1", "--excitation", "chirp",
+                 "--out", out]) == 2
+    assert "unknown option(s) f9" in capsys.readouterr().err
+    for bad in (["--duration", "-1"], ["--duration", "nan"], ["--excitation", "sine"],
+                ["--excitation-option", "novalue"], ["--storage", "zip"]):
+        with pytest.raises(SystemExit) as info:
+            main(["simulate", "--out", out, *bad])
+        assert info.value.code == 2
+        assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert not Path(out).exists()
+
+
+def test_cli_lists_the_core_excitations() -> None:
+    assert simulate_cli.EXCITATIONS == EXCITATIONS
