@@ -12,6 +12,7 @@ import numpy as np
 from .. import topics as tp
 from ..core.align import align_streams, robust_period
 from ..core.errors import BagError
+from .cdr import decode_stamped
 from .common import LoadedRecording, RawMessage, open_reader, typestore
 
 SIGNALS = (tp.THRUST, tp.SPEED, tp.POSITION)
@@ -104,11 +105,16 @@ def _read_triple(reader: Any, chosen: dict[str, str]) -> dict[str, _Stream]:
     by_topic = {topic: signal for signal, topic in chosen.items()}
     streams: dict[str, _Stream] = {s: ([], []) for s in chosen}
     conns = [c for c in reader.connections if c.topic in by_topic]
+    # the fast path only for the stock definitions (same type hash as ROS 2 Jazzy, or none)
+    fast = {c.id for c in conns if c.digest in ("", store.hash_rihs01(c.msgtype))}
     for conn, _, data in reader.messages(connections=conns):
-        msg = store.deserialize_cdr(data, conn.msgtype)
         stamps, values = streams[by_topic[conn.topic]]
-        stamps.append(_stamp_ns(msg))
-        values.append(_VALUE[conn.msgtype](msg))
+        got = decode_stamped(data) if conn.id in fast else None
+        if got is None:
+            msg = store.deserialize_cdr(data, conn.msgtype)
+            got = _stamp_ns(msg), _VALUE[conn.msgtype](msg)
+        stamps.append(got[0])
+        values.append(got[1])
     return streams
 
 

@@ -8,11 +8,11 @@ from typing import Any
 
 import numpy as np
 from rosbags.rosbag2 import Writer
-from rosbags.typesys.store import Typestore
 
 from .. import topics as tp
 from ..core.errors import BagError, SysIdError
 from ..core.signals import FloatArray, Recording
+from .cdr import encode_stamped
 from .common import (
     CUSTOM_PREFIX,
     DEFAULT_QOS,
@@ -20,45 +20,15 @@ from .common import (
     SPEED_DERIVED_NOTE,
     connection_args,
     storage_plugin,
-    typestore,
 )
 
 
 def _stamps_ns(t: FloatArray) -> np.ndarray[Any, np.dtype[np.int64]]:
     ns = np.round(np.asarray(t, dtype=np.float64) * 1e9)
-    if not np.all(np.isfinite(ns)) or np.any(ns < 0) or np.any(ns >= 2**63):
-        raise BagError("stamps must be finite, non-negative seconds to be written to a bag")
+    if not np.all(np.isfinite(ns)) or np.any(ns < 0) or np.any(ns >= 2**31 * 1e9):
+        raise BagError("stamps must be finite seconds in [0, 2**31) (builtin_interfaces/Time) "
+                       "to be written to a bag")
     return ns.astype(np.int64)
-
-
-def _header(store: Typestore, ns: int, frame_id: str) -> Any:
-    time_t = store.types["builtin_interfaces/msg/Time"]
-    header_t = store.types["std_msgs/msg/Header"]
-    return header_t(stamp=time_t(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000),
-                    frame_id=frame_id)
-
-
-def _encoders(store: Typestore) -> dict[str, Any]:
-    """Per signal: (msgtype, function(header, value) -> message)."""
-    vec = store.types["geometry_msgs/msg/Vector3"]
-    wrench = store.types["geometry_msgs/msg/Wrench"]
-    twist = store.types["geometry_msgs/msg/Twist"]
-    point = store.types["geometry_msgs/msg/Point"]
-    zero = vec(x=0.0, y=0.0, z=0.0)
-
-    def thrust(h: Any, x: float) -> Any:
-        return store.types[tp.THRUST_TYPE](header=h, wrench=wrench(force=vec(x=x, y=0.0, z=0.0),
-                                                                  torque=zero))
-
-    def speed(h: Any, x: float) -> Any:
-        return store.types[tp.SPEED_TYPE](header=h, twist=twist(linear=vec(x=x, y=0.0, z=0.0),
-                                                               angular=zero))
-
-    def position(h: Any, x: float) -> Any:
-        return store.types[tp.POSITION_TYPE](header=h, point=point(x=x, y=0.0, z=0.0))
-
-    return {"thrust": (tp.THRUST_TYPE, thrust), "speed": (tp.SPEED_TYPE, speed),
-            "position": (tp.POSITION_TYPE, position)}
 
 
 def _custom_data(rec: Recording, extra: Mapping[str, str] | None) -> dict[str, str]:
@@ -93,32 +63,31 @@ def write_recording(
     if path.exists():
         raise BagError(f"{path} exists already, not overwriting")
     plugin = storage_plugin(storage)
-    store = typestore()
     ns = _stamps_ns(rec.t)
-    enc = _encoders(store)
-    signals: list[tuple[str, Any, FloatArray]] = []
+    signals: list[tuple[str, str, FloatArray]] = []  # topic, type, values
     for name in ("thrust", "speed", "position"):
         if name == "speed" and rec.speed_derived:
             continue
-        signals.append((tp.input_topic(namespace, name), enc[name], rec.signal(name)))
+        signals.append((tp.input_topic(namespace, name), tp.INPUT_TYPES[name], rec.signal(name)))
     for name, values in (extra_points or {}).items():
         if len(values) != len(ns):
             raise BagError(f"extra topic '{name}' has {len(values)} values, recording {len(ns)}")
-        signals.append((tp.input_topic(namespace, name), enc["position"], np.asarray(values)))
+        signals.append((tp.input_topic(namespace, name), tp.POSITION_TYPE,
+                        np.asarray(values, dtype=np.float64)))
     try:
         with Writer(path, version=9, storage_plugin=plugin) as writer:
             conns = []
-            for topic, (msgtype, _), _ in signals:
+            for topic, msgtype, _ in signals:
                 msgdef, digest = connection_args(msgtype)
                 conns.append(writer.add_connection(topic, msgtype, msgdef=msgdef, rihs01=digest,
                                                    offered_qos_profiles=[DEFAULT_QOS]))
             for key, value in _custom_data(rec, custom_data).items():
                 writer.set_custom_data(key, value)
+            columns = [(conn, msgtype, values.tolist())
+                       for conn, (_, msgtype, values) in zip(conns, signals, strict=True)]
             for k, stamp in enumerate(ns.tolist()):
-                header = _header(store, stamp, FRAME_ID)
-                for conn, (_, (msgtype, make), values) in zip(conns, signals, strict=True):
-                    msg = make(header, float(values[k]))
-                    writer.write(conn, stamp, store.serialize_cdr(msg, msgtype))
+                for conn, msgtype, values in columns:
+                    writer.write(conn, stamp, encode_stamped(msgtype, stamp, FRAME_ID, values[k]))
     except SysIdError:
         raise
     except Exception as exc:
