@@ -135,3 +135,25 @@ def test_bad_arguments_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]
 
 def test_cli_lists_the_core_excitations() -> None:
     assert simulate_cli.EXCITATIONS == EXCITATIONS
+
+
+SAMPLE_BAGS = {"paper_speed_nominal": "nominal_noisy.yaml",
+               "paper_speed_cogging": "cogging.yaml", "paper_speed_coulomb": "coulomb.yaml"}
+
+
+def test_sample_bags_are_small_and_regenerable() -> None:
+    """bags/ holds what scripts/make_bags.sh makes with today's simulator (sample for sample)."""
+    total = sum(p.stat().st_size for p in (REPO / "bags").rglob("*") if p.is_file())
+    assert total < 5e6
+    for name, plant_file in SAMPLE_BAGS.items():
+        loaded = read_recording(REPO / "bags" / name)
+        rec = loaded.recording
+        assert len(rec) >= 4000 and rec.sample_rate_hz == pytest.approx(500.0)
+        assert loaded.report is not None
+        assert rec.meta["pmsm_sysid.plant_file"] == f"plants/{plant_file}"
+        want = simulate(load_plant(REPO / "plants" / plant_file),
+                        make_excitation("paper-speed", len(rec), 500.0), seed=1)
+        for signal in ("thrust", "speed", "position"):
+            np.testing.assert_array_equal(rec.signal(signal), want.signal(signal),
+                                          err_msg=f"{name}: run scripts/make_bags.sh")
+    assert "make_bags.sh" in (REPO / "bags" / "README.md").read_text()
