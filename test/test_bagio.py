@@ -486,3 +486,55 @@ def test_bad_stamps_refused_and_nonfinite_values_counted(tmp_path: Path) -> None
     assert loaded.report.n_nonfinite == 2 and loaded.report.n_aligned == 98
     assert loaded.report.n_unaligned == 4 and loaded.report.n_gaps == 2
     assert np.all(np.isfinite(loaded.recording.thrust))
+
+
+IDENTIFY_JSON = {
+    "input": "thrust", "output": "speed", "sample_rate_hz": 500.0,
+    "structure": {"ny": 30, "nu": 40, "degree": 2, "delay": 1, "n_candidates": 2556},
+    "terms": [{"name": "u(k-14)", "estimate": 33.7, "std": 0.99, "err": 0.043},
+              {"name": "y(k-1)u(k-10)", "estimate": -0.25, "std": None, "err": 0.001}],
+    "validation": {"estimation": {"nmse": 0.01, "r2": 0.99},
+                   "validation": {"nmse": 0.02, "r2": 0.98, "osa_r2": 0.999},
+                   "correlation_tests": {k: {"max_abs": 0.05, "band": 0.062, "pass": k != "ue"}
+                                         for k in ("ee", "ue", "u2e", "u2e2", "e_eu")}},
+    "timing_ms": {"regressors": 1.0, "selection": 2.0, "total": 250.0}}
+GFRF_JSON = {"sample_rate_hz": 500.0, "stable": True, "poles": [],
+             "h1": {"peaks": [{"freq_hz": 16.5, "freq_norm": 0.033, "gain_db": 50.1}]},
+             "h2": {"ridges": [{"kind": "f1+f2", "freq_hz": 16.5, "freq_norm": 0.033}]},
+             "h3": {"ridges": []}}
+
+
+def test_typed_messages_from_json(tmp_path: Path) -> None:
+    from pmsm_sysid.bagio import BagRecorder
+    from pmsm_sysid.bagio.schemas import (
+        encode_model_msg,
+        encode_ridges_msg,
+        encode_validation_msg,
+    )
+
+    window = (2 * 10**9, 4 * 10**9 - 2_000_000)
+    blobs = {"NarxModel": encode_model_msg(IDENTIFY_JSON, stamp_ns=5 * 10**9, window=window),
+             "ValidationStats": encode_validation_msg(IDENTIFY_JSON["validation"],
+                                                      stamp_ns=5 * 10**9, window=window),
+             "GfrfRidges": encode_ridges_msg(GFRF_JSON, stamp_ns=6 * 10**9)}
+    with BagRecorder(tmp_path / "typed", storage="mcap") as rec:
+        for name, blob in blobs.items():
+            rec.add_topic(f"/typed/{name}", f"pmsm_sysid/msg/{name}")
+            rec.write(f"/typed/{name}", 7 * 10**9, blob)
+    with AnyReader([tmp_path / "typed"]) as reader:  # decoded from the bag's own definitions
+        msgs = {c.msgtype.split("/")[-1]: reader.deserialize(raw, c.msgtype)
+                for c, _, raw in reader.messages()}
+    m = msgs["NarxModel"]
+    assert (m.ny, m.nu, m.degree, m.delay, m.n_candidates) == (30, 40, 2, 1, 2556)
+    assert [(t.name, t.estimate, t.err) for t in m.terms] == [
+        ("u(k-14)", 33.7, 0.043), ("y(k-1)u(k-10)", -0.25, 0.001)]
+    assert np.isnan(m.terms[1].std) and m.fit_time_s == 0.25
+    assert (m.window_end.sec, m.window_end.nanosec) == (3, 998_000_000)
+    v = msgs["ValidationStats"]
+    assert [t.name for t in v.correlation_tests] == ["ee", "ue", "u2e", "u2e2", "e_eu"]
+    assert v.validation_osa_r2 == 0.999 and v.all_passed is False
+    g = msgs["GfrfRidges"]
+    assert g.stable and g.h1_peaks[0].gain_db == 50.1 and g.h2_ridges[0].kind == "f1+f2"
+    assert np.isnan(g.h2_ridges[0].gain_db) and g.h3_ridges == []
+    with pytest.raises(BagError, match="not an identify JSON model"):
+        encode_model_msg({"terms": []}, stamp_ns=0)
