@@ -61,7 +61,23 @@ class GfrfAnalysis:
         }
         if self.grid is not None:
             out["grid"] = self.grid
-        return out
+        safe: dict[str, Any] = json_safe(out)
+        return safe
+
+
+def json_safe(obj: Any) -> Any:
+    """Plain Python values with non-finite floats as None (strict JSON: NaN/Inf -> null)."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    return obj
 
 
 def excitation_of(model_json: Mapping[str, Any]) -> ExcitationSummary | None:

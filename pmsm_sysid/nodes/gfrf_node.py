@@ -1,0 +1,136 @@
+"""GfrfNode: GFRFs, ridges and validation statistics of each identified model, live.
+
+Subscribes to ``/pmsm_sysid/model`` (std_msgs/String, the identify JSON of one window plus
+``window``, ``model_id``, ``output``). The subscription callback only hands the raw string to
+a bounded latest-wins queue (``queue_size``, default 1; a model replaced before it was
+analysed is counted as skipped); a worker thread parses it and runs
+:func:`pmsm_sysid.core.gfrf_analysis.analyse_json` (H1 peaks, H2/H3 ridges, poles, support by
+the excitation) off the executor. A timer publishes finished results from the executor
+thread (layouts in :mod:`.gfrf_msgs`):
+
+* ``/pmsm_sysid/ridges`` (std_msgs/String): the gfrf JSON + ``model_id``/``output``/``window``;
+* ``/pmsm_sysid/ridge_frequencies`` (std_msgs/Float64MultiArray): one row per peak/ridge;
+* ``/pmsm_sysid/validation`` (diagnostic_msgs/DiagnosticArray): status
+  ``gfrf/validation/<output>`` with the model's validation statistics.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections import deque
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.context import Context
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_msgs.msg import Float64MultiArray, String
+
+from ..core.errors import GfrfError
+from ..core.fitqueue import FitWorker, LatestQueue
+from ..topics import MODEL_TOPIC, RIDGES_ARRAY_TOPIC, RIDGES_TOPIC, VALIDATION_TOPIC
+from .gfrf_msgs import ridges_message, validation_message
+
+DEFAULTS: dict[str, Any] = {"queue_size": 1, "orders": [1, 2, 3], "publish_period_s": 0.05}
+_Item = tuple[str, float]  # (raw JSON, monotonic time received)
+
+
+def analyse_message(text: str, orders: tuple[int, ...] = (1, 2, 3)) -> dict[str, Any]:
+    """The ridges JSON of one model message (pure: what the worker thread runs)."""
+    from ..core.errors import SysIdError
+    from ..core.gfrf_analysis import analyse_json
+
+    t0 = time.perf_counter()
+    try:
+        model = json.loads(text)
+    except ValueError as exc:
+        raise GfrfError(f"model message is not JSON: {exc}") from exc
+    if not isinstance(model, dict):
+        raise GfrfError("model message is not a JSON object")
+    try:
+        res = analyse_json(model, orders=orders).to_dict()
+    except SysIdError as exc:
+        raise GfrfError(f"model {model.get('model_id', '?')}: {exc}") from exc
+    res.update({"model_id": model.get("model_id"), "output": model.get("output"),
+                "window": model.get("window"),
+                "analysis_time_ms": 1e3 * (time.perf_counter() - t0)})
+    return {"gfrf": res, "model": model}
+
+
+class GfrfNode(Node):
+    """Model messages in; ridges, ridge frequencies and validation statistics out."""
+
+    def __init__(self, *, context: Context | None = None, node_name: str = "pmsm_gfrf",
+                 parameter_overrides: list[Parameter] | None = None) -> None:
+        super().__init__(node_name, context=context,
+                         parameter_overrides=parameter_overrides or [])
+        p = {k: self.declare_parameter(k, v).value for k, v in DEFAULTS.items()}
+        orders = tuple(int(o) for o in p["orders"])
+        if not orders or any(o not in (1, 2, 3) for o in orders):
+            raise GfrfError(f"parameter orders must be among 1, 2, 3 (got {list(orders)})")
+        self._lock = threading.Lock()
+        self._done: deque[dict[str, Any]] = deque(maxlen=16)
+        self._errors: deque[str] = deque(maxlen=20)
+        self.received = 0
+        self.published = 0
+        self.last_ridges: dict[str, Any] | None = None
+        self.last_validation: dict[str, Any] | None = None
+        self.queue: LatestQueue[_Item] = LatestQueue(int(p["queue_size"]))
+        self.worker: FitWorker[_Item, dict[str, Any]] = FitWorker(
+            self.queue, lambda item: analyse_message(item[0], orders), self._finished,
+            on_error=self._failed, latency_of=lambda item: item[1], name="gfrf-worker")
+        self._ridges_pub = self.create_publisher(String, RIDGES_TOPIC, 10)
+        self._array_pub = self.create_publisher(Float64MultiArray, RIDGES_ARRAY_TOPIC, 10)
+        self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION_TOPIC, 10)
+        self.create_subscription(String, MODEL_TOPIC, self._on_model, 10)
+        self._timer = self.create_timer(float(p["publish_period_s"]), self.publish_results)
+        self.worker.start()
+
+    def _on_model(self, msg: String) -> None:
+        self.received += 1
+        self.queue.put((msg.data, time.monotonic()))
+
+    def _finished(self, _item: _Item, result: dict[str, Any]) -> None:
+        with self._lock:
+            self._done.append(result)
+
+    def _failed(self, _item: _Item, exc: Exception) -> None:
+        with self._lock:
+            self._errors.append(str(exc))
+
+    def publish_results(self) -> None:
+        """Publish what the worker finished (timer callback; also call at shutdown)."""
+        with self._lock:
+            done, self._done = list(self._done), deque(maxlen=16)
+            errors, self._errors = list(self._errors), deque(maxlen=20)
+        for e in errors:
+            self.get_logger().warning(  # type: ignore[no-untyped-call]
+                f"model not analysed: {e}")
+        for r in done:
+            gfrf, model = r["gfrf"], r["model"]
+            self._ridges_pub.publish(String(data=json.dumps(gfrf, allow_nan=False)))
+            self._array_pub.publish(ridges_message(gfrf))
+            self._val_pub.publish(validation_message(model, gfrf, self._stamp(model)))
+            self.last_ridges = gfrf
+            self.last_validation = model.get("validation")
+            self.published += 1
+
+    def _stamp(self, model: dict[str, Any]) -> Any:
+        from ..rosutil import stamp_from_ns
+
+        end = (model.get("window") or {}).get("end_stamp")
+        return stamp_from_ns(round(float(end) * 1e9)) if end is not None else None
+
+    def summary(self) -> dict[str, Any]:
+        """Counters and the latest results (the ``run --json`` summary's GFRF part)."""
+        st = self.worker.stats
+        return {"models_received": self.received, "models_skipped": self.queue.skipped,
+                "models_analysed": st.processed - st.failed, "models_failed": st.failed,
+                "ridges_published": self.published, "last_ridges": self.last_ridges,
+                "last_validation": self.last_validation}
+
+    def destroy_node(self) -> None:
+        self.worker.stop()
+        super().destroy_node()  # type: ignore[no-untyped-call]
