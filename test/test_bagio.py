@@ -538,3 +538,14 @@ def test_typed_messages_from_json(tmp_path: Path) -> None:
     assert np.isnan(g.h2_ridges[0].gain_db) and g.h3_ridges == []
     with pytest.raises(BagError, match="not an identify JSON model"):
         encode_model_msg({"terms": []}, stamp_ns=0)
+
+
+def test_unstamped_publisher_is_named(tmp_path: Path) -> None:
+    from pmsm_sysid.core.errors import DataError
+
+    rec = _rec(n=50)
+    unstamped = Recording(t=np.zeros(50), thrust=rec.thrust, speed=rec.speed,
+                          position=rec.position, sample_rate_hz=500.0)
+    write_recording(tmp_path / "b", unstamped)
+    with pytest.raises(DataError, match="same on every position message"):
+        read_recording(tmp_path / "b")

@@ -11,7 +11,7 @@ import numpy as np
 
 from .. import topics as tp
 from ..core.align import align_streams, robust_period
-from ..core.errors import BagError
+from ..core.errors import BagError, DataError
 from .cdr import decode_stamped
 from .common import LoadedRecording, RawMessage, open_reader, typestore
 
@@ -184,9 +184,15 @@ def read_recording(
             used = {topic: found[topic] for topic in layout.values()}
         custom = getattr(reader.storage.metadata, "custom", None) or {}
     speed = _seconds(streams[tp.SPEED]) if streams.get(tp.SPEED, ([], []))[0] else None
-    rec, report = align_streams(_seconds(streams[tp.THRUST]), speed,
-                                _seconds(streams[tp.POSITION]), tolerance_s=tolerance_s,
-                                source=str(path))
+    try:
+        rec, report = align_streams(_seconds(streams[tp.THRUST]), speed,
+                                    _seconds(streams[tp.POSITION]), tolerance_s=tolerance_s,
+                                    source=str(path))
+    except DataError as exc:
+        hint = ""
+        if len(set(streams[tp.POSITION][0])) <= 1:
+            hint = "; header.stamp is the same on every position message (publisher not stamping?)"
+        raise DataError(f"{path}: {exc}{hint}") from exc
     # The wire carries integer nanoseconds: read the rate from them (500 Hz, not 499.9999...).
     ns = np.round(rec.t * 1e9).astype(np.int64)
     rate = 1e9 / robust_period(ns)
