@@ -438,6 +438,10 @@ def test_bad_inputs() -> None:
         simulate(NOM, np.zeros((2, 2)))
     with pytest.raises(PlantError, match="finite"):
         MotorSimulator(NOM, x0=float("nan"))
+    with pytest.raises(PlantError, match="too stiff to simulate"):
+        MotorSimulator(NOM.with_effects(coulomb_friction=CoulombFriction(500.0, 1e-6)))
+    with pytest.raises(PlantError, match="at most 4096"):
+        replace(NOM, substeps=10**6)
 
 
 def test_effects_force_broadcasts() -> None:

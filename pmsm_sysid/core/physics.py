@@ -46,6 +46,7 @@ from .signals import Recording
 FloatArray = NDArray[np.float64]
 
 _MAX_FINE_STEPS = 64
+MAX_SUBSTEPS = 4096
 _NEAR_ZERO_HLAMBDA = 0.2
 _HISTORY_MIN = 1024
 
@@ -222,6 +223,10 @@ class MotorSimulator:
     def _configure(self, plant: Plant) -> None:
         period = plant.sample_period_s
         self._n_sub = effective_substeps(plant)
+        if self._n_sub > MAX_SUBSTEPS:
+            raise PlantError(f"plant too stiff to simulate at {plant.sample_rate_hz:g} Hz: it "
+                             f"needs {self._n_sub} RK4 steps per sample (limit {MAX_SUBSTEPS});"
+                             " raise smoothing_mps or lower the friction/stiffness")
         self._h = period / self._n_sub
         delay = plant.transport_delay.delay_s if plant.transport_delay is not None else 0.0
         ratio = delay / period

@@ -232,6 +232,8 @@ def _check_plant(p: Plant) -> None:
             _check_value("", f.name, value)
     if not isinstance(p.substeps, int):
         raise PlantError(f"substeps must be an integer, got {p.substeps!r}")
+    if p.substeps > 4096:
+        raise PlantError(f"substeps must be at most 4096, got {p.substeps}")
 
 
 def nominal_plant() -> Plant:
