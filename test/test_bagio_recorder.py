@@ -160,11 +160,17 @@ def test_sigint_finalises_everything(tmp_path: Path) -> None:
     assert sorted(p.name for p in bag.iterdir()) == ["interrupted.db3", "metadata.yaml"]
 
 
-def test_killed_mcap_is_a_clear_error(tmp_path: Path) -> None:
+def test_killed_mcap_is_refused_then_salvaged(tmp_path: Path) -> None:
     bag = tmp_path / "killed_mcap"
-    _record_then_signal(bag, "mcap", signal.SIGKILL)
-    with pytest.raises(BagError, match="corrupt, truncated"):
+    flushed, _ = _record_then_signal(bag, "mcap", signal.SIGKILL)
+    with pytest.raises(BagError, match=r"corrupt, truncated.*repair BAG"):
         iter_raw(bag).__next__()
+    out = subprocess.run([sys.executable, "-m", "pmsm_sysid.bagio", "repair", str(bag)],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    got = _bag_messages(bag)
+    assert len(got) >= flushed and got == [(k, float(k)) for k in range(len(got))]
+    assert (bag / "killed_mcap.mcap.damaged").is_file()
 
 
 def test_repair_rebuilds_lost_metadata(tmp_path: Path) -> None:
@@ -190,5 +196,9 @@ def test_repair_rebuilds_lost_metadata(tmp_path: Path) -> None:
         assert new[key] == old[key], key
     write_recording(tmp_path / "m", Recording(t=t, thrust=t, speed=t, position=t,
                                               sample_rate_hz=500.0), storage="mcap")
-    with pytest.raises(BagError, match=r"found an \.mcap bag"):
-        repair(tmp_path / "m")
+    blob = next((tmp_path / "m").glob("*.mcap"))
+    blob.write_bytes(blob.read_bytes()[:-40])  # footer gone, chunks intact
+    assert repair(tmp_path / "m") == 3 * n
+    np.testing.assert_array_equal(read_recording(tmp_path / "m").recording.t, t)
+    with pytest.raises(BagError, match="not a bag directory"):
+        repair(tmp_path / "nothing")

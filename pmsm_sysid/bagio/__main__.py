@@ -1,4 +1,4 @@
-"""``python -m pmsm_sysid.bagio repair BAG``: rebuild metadata.yaml of a killed sqlite3 bag."""
+"""``python -m pmsm_sysid.bagio repair BAG``: make a bag whose recording was killed readable."""
 
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m pmsm_sysid.bagio",
                                      description=__doc__.split(":")[0])
     sub = parser.add_subparsers(dest="cmd", required=True)
-    rep = sub.add_parser("repair", help="rebuild metadata.yaml of a sqlite3 bag")
+    rep = sub.add_parser("repair",
+                         help="sqlite3: rebuild metadata.yaml; mcap: rewrite from complete chunks")
     rep.add_argument("bag")
     args = parser.parse_args(argv)
     try:
@@ -21,7 +22,7 @@ def main(argv: list[str] | None = None) -> int:
     except SysIdError as exc:
         print(f"repair: error: {exc}", file=sys.stderr)
         return 2
-    print(f"{args.bag}: metadata.yaml rebuilt, {n} messages")
+    print(f"{args.bag}: repaired, {n} messages")
     return 0
 
 

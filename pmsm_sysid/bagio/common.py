@@ -150,12 +150,9 @@ def _explain(path: Path, exc: Exception) -> str:
     text = _reason(exc)
     if isinstance(exc, FileNotFoundError) and "metadata" in text:
         stores = sorted(p.name for p in path.glob("*") if p.suffix in (".mcap", ".db3"))
-        if any(name.endswith(".db3") for name in stores):
+        if stores:
             return (f"no metadata.yaml beside {', '.join(stores)}: not finalised; "
                     "repair it with `python -m pmsm_sysid.bagio repair BAG`")
-        if stores:
-            return (f"no metadata.yaml beside {', '.join(stores)}: not finalised "
-                    "(an .mcap killed while recording cannot be repaired here)")
         return "not a rosbag2 directory (no metadata.yaml)"
     if "files are missing" in text:
         return f"storage file(s) listed in metadata.yaml are missing ({text})"
@@ -163,6 +160,9 @@ def _explain(path: Path, exc: Exception) -> str:
         return f"unknown storage plugin in metadata.yaml ({text}); expected mcap or sqlite3"
     if "metadata" in text.lower() or "YAML" in text:
         return f"corrupt metadata.yaml ({text})"
-    return f"cannot open storage: corrupt, truncated or not a bag ({text})"
+    hint = ""
+    if "end magic" in text or "footer" in text.lower():
+        hint = "; if its recording was killed, `python -m pmsm_sysid.bagio repair BAG` salvages it"
+    return f"cannot open storage: corrupt, truncated or not a bag ({text}){hint}"
 
 

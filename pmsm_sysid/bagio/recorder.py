@@ -15,9 +15,9 @@ Guarantee: a hard kill (SIGKILL, power loss of the process) loses at most the me
 written since the last flush; the bag stays readable as-is by ``rosbags``/``ros2 bag``, and
 :func:`repair` rebuilds ``metadata.yaml`` from the database in the rare case the kill hit a
 flush. SIGINT/SIGTERM turned into an exception or normal exit (rclpy does this) finalise the
-bag through ``close()`` (context manager, ``atexit``). With ``storage="mcap"`` the chunk is
-flushed to disk at each flush too, but a killed ``.mcap`` lacks its footer and is not
-repaired here.
+bag through ``close()`` (context manager, ``atexit``). With ``storage="mcap"`` the pending
+chunk is written to disk at each flush too, but a killed ``.mcap`` lacks its footer: readers
+refuse it until :func:`repair` rewrites it from its complete chunks (same loss bound).
 """
 
 from __future__ import annotations
@@ -198,18 +198,25 @@ def _old_custom(bag: Path) -> dict[str, str] | None:
 
 
 def repair(path: str | Path) -> int:
-    """Rebuild ``metadata.yaml`` of a sqlite3 bag from its database; returns the message count.
+    """Make a killed bag readable again; returns the number of messages recovered.
 
-    Opening the database read-write lets SQLite roll back a half-written transaction and
-    replay a committed WAL, so the result holds every committed message.
+    sqlite3: rebuild ``metadata.yaml`` from the database (opening it read-write lets SQLite
+    roll back a half-written transaction and replay a committed WAL, so every committed
+    message is kept). mcap: rewrite the file from its complete chunks
+    (:func:`~.mcap_salvage.salvage_mcap`; the damaged file is kept as ``*.mcap.damaged``).
     """
     bag = Path(path)
     if not bag.is_dir():
         raise BagError(f"{bag}: not a bag directory")
     dbs = sorted(bag.glob("*.db3"))
-    if len(dbs) != 1:
-        kind = "an .mcap bag" if any(bag.glob("*.mcap")) else f"{len(dbs)} .db3 files"
-        raise BagError(f"{bag}: repair needs exactly one .db3 file, found {kind}")
+    mcaps = sorted(bag.glob("*.mcap"))
+    if len(mcaps) == 1 and not dbs:
+        from .mcap_salvage import salvage_mcap
+
+        return salvage_mcap(bag, mcaps[0])
+    if len(dbs) != 1 or mcaps:
+        raise BagError(f"{bag}: repair needs exactly one .db3 or one .mcap file, found "
+                       f"{len(dbs)} .db3 and {len(mcaps)} .mcap")
     try:
         con = sqlite3.connect(dbs[0])
         try:
