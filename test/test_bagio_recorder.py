@@ -202,3 +202,25 @@ def test_repair_rebuilds_lost_metadata(tmp_path: Path) -> None:
     np.testing.assert_array_equal(read_recording(tmp_path / "m").recording.t, t)
     with pytest.raises(BagError, match="not a bag directory"):
         repair(tmp_path / "nothing")
+
+
+def test_salvage_truncated_multichunk_mcap_keeps_a_clean_prefix(tmp_path: Path) -> None:
+    from pmsm_sysid.bagio import repair
+
+    n = 20000  # ~6 MB: several 1 MiB chunks
+    t = np.arange(n) / 500.0
+    rec = Recording(t=t, thrust=t * 3, speed=-t, position=t * 2, sample_rate_hz=500.0)
+    write_recording(tmp_path / "m", rec, storage="mcap")
+    blob = next((tmp_path / "m").glob("*.mcap"))
+    data = blob.read_bytes()
+    blob.write_bytes(data[: int(len(data) * 0.6)])  # cut inside a chunk
+    kept = repair(tmp_path / "m")
+    assert 0.4 * 3 * n < kept < 0.6 * 3 * n
+    loaded = read_recording(tmp_path / "m")
+    back = loaded.recording
+    m = len(back)
+    assert kept // 3 - 1 <= m <= kept // 3 + 1
+    np.testing.assert_array_equal(back.t, t[:m])  # a prefix, in order, nothing invented
+    np.testing.assert_array_equal(back.thrust, 3 * t[:m])
+    np.testing.assert_array_equal(back.position, 2 * t[:m])
+    assert loaded.report.n_gaps == 0
