@@ -362,14 +362,18 @@ def test_wrong_message_type_on_topic(tmp_path: Path) -> None:
         read_recording(tmp_path / "b")
 
 
-def test_bad_bags_exit_2_with_one_line_from_cli(tmp_path: Path) -> None:
-    """Through the console script: a recording verb given a non-bag."""
+@pytest.mark.parametrize("verb", ["identify", "import-mat"])
+def test_bad_inputs_exit_2_with_one_line_from_cli(tmp_path: Path, verb: str) -> None:
+    """Through the console script: a directory that is neither a bag nor a .mat file."""
     (tmp_path / "notabag").mkdir()
     script = Path(sys.executable).with_name("pmsm-sysid")
-    out = subprocess.run([str(script), "import-mat", str(tmp_path / "notabag"), "--out",
-                          str(tmp_path / "o")], capture_output=True, text=True, timeout=60)
+    extra = ["--out", str(tmp_path / "o")] if verb == "import-mat" else []
+    out = subprocess.run([str(script), verb, str(tmp_path / "notabag"), *extra],
+                         capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and out.stdout == ""
     assert len(out.stderr.strip().splitlines()) == 1 and "Traceback" not in out.stderr
+    if verb == "identify":
+        assert "not a rosbag2 directory (no metadata.yaml)" in out.stderr
 
 
 # --------------------------------------------------------------------------- own schemas
