@@ -8,6 +8,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 from scipy.signal import cont2discrete
@@ -459,3 +461,21 @@ def test_much_faster_than_real_time() -> None:
     started = time.perf_counter()
     simulate(plant, 50 * np.sin(2 * np.pi * 16.5 * np.arange(5000) * T))
     assert time.perf_counter() - started < 2.0  # 10 s of motor time; typically ~0.1 s
+
+
+@settings(max_examples=20, deadline=None)
+@given(mass=st.floats(0.1, 50.0), viscous=st.just(0.0) | st.floats(1e-3, 500.0),
+       substeps=st.integers(1, 12),
+       seed=st.integers(0, 2**16))
+def test_linear_plants_follow_the_zoh_recursion(mass: float, viscous: float, substeps: int,
+                                                seed: int) -> None:
+    """Any mass-damper: v(k+1) = a v(k) + b u(k), a = exp(-BT/M), b = (1-a)/B (T/M if B=0)."""
+    plant = replace(NOM, mass_kg=mass, viscous_n_per_mps=viscous, substeps=substeps)
+    u = prbs_like(300, seed=seed)
+    v = simulate(plant, u).speed
+    a = math.exp(-viscous * T / mass)
+    b = -math.expm1(-viscous * T / mass) / viscous if viscous > 0 else T / mass
+    scale = np.abs(v).max() + 1e-12
+    hl = viscous / mass * T / max(substeps, effective_substeps(plant))
+    tol = max(1e-12, 0.05 * hl**5) * scale * 300   # RK4 local error (h lambda)^5/120
+    np.testing.assert_allclose(v[1:], a * v[:-1] + b * u[:-1], rtol=0, atol=tol)
