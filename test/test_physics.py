@@ -479,3 +479,19 @@ def test_linear_plants_follow_the_zoh_recursion(mass: float, viscous: float, sub
     hl = viscous / mass * T / max(substeps, effective_substeps(plant))
     tol = max(1e-12, 0.05 * hl**5) * scale * 300   # RK4 local error (h lambda)^5/120
     np.testing.assert_allclose(v[1:], a * v[:-1] + b * u[:-1], rtol=0, atol=tol)
+
+
+def test_delay_switched_on_at_run_time_uses_the_command_history() -> None:
+    u = prbs_like(600)
+    sim = MotorSimulator(NOM)
+    v = []
+    for k in range(600):
+        if k == 300:
+            sim.set_plant(NOM.with_effects(transport_delay=TransportDelay(3 * T)))
+        v.append(sim.measure()[0])
+        sim.advance(u[k])
+    va = np.array(v)
+    a = math.exp(-LAM * T)
+    b = (1 - a) / B
+    np.testing.assert_allclose(va[1:301], a * va[:300] + b * u[:300], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(va[301:], a * va[300:-1] + b * u[297:-3], rtol=0, atol=1e-13)
