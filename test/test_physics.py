@@ -494,4 +494,4 @@ def test_delay_switched_on_at_run_time_uses_the_command_history() -> None:
     a = math.exp(-LAM * T)
     b = (1 - a) / B
     np.testing.assert_allclose(va[1:301], a * va[:300] + b * u[:300], rtol=0, atol=1e-13)
-    np.testing.assert_allclose(va[301:], a * va[300:-1] + b * u[297:-3], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(va[301:], a * va[300:-1] + b * u[297:-4], rtol=0, atol=1e-13)
