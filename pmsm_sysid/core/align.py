@@ -173,6 +173,17 @@ def _tolerance(tolerance_s: float | None, pos: _Clean) -> float:
     return tol
 
 
+def _match(cx: _Clean, cu: _Clean, cv: _Clean | None,
+           tol: float) -> tuple[IntArray, IntArray, IntArray | None]:
+    """Indices into position, thrust (and speed) of the samples present on every stream."""
+    iu, ju = mutual_nearest(cx.t, cu.t, tol)
+    if cv is None:
+        return iu, ju, None
+    iv, jv = mutual_nearest(cx.t, cv.t, tol)
+    common, a, b = np.intersect1d(iu, iv, assume_unique=True, return_indices=True)
+    return common.astype(np.intp), ju[a], jv[b]
+
+
 def align_streams(
     thrust: Stream,
     speed: Stream | None,
@@ -188,13 +199,7 @@ def align_streams(
     cu, cx = _clean("thrust", thrust), _clean("position", position)
     cv = _clean("speed", speed) if speed is not None else None
     tol = _tolerance(tolerance_s, cx)
-    iu, ju = mutual_nearest(cx.t, cu.t, tol)
-    sel_x, sel_u = iu, ju
-    sel_v: IntArray | None = None
-    if cv is not None:
-        iv, jv = mutual_nearest(cx.t, cv.t, tol)
-        common, a, b = np.intersect1d(iu, iv, assume_unique=True, return_indices=True)
-        sel_x, sel_u, sel_v = common.astype(np.intp), ju[a], jv[b]
+    sel_x, sel_u, sel_v = _match(cx, cu, cv, tol)
     n = len(sel_x)
     if n < 3:
         raise DataError(
