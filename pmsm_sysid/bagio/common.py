@@ -154,6 +154,8 @@ def _explain(path: Path, exc: Exception) -> str:
             return (f"no metadata.yaml beside {', '.join(stores)}: not finalised; "
                     "repair it with `python -m pmsm_sysid.bagio repair BAG`")
         return "not a rosbag2 directory (no metadata.yaml)"
+    if "permission denied" in text.lower():
+        return f"permission denied ({text})"
     if "files are missing" in text:
         return f"storage file(s) listed in metadata.yaml are missing ({text})"
     if "Storage plugin" in text:
