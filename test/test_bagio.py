@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -326,16 +329,28 @@ def _read_as_nobody(bag: Path) -> str:
     return out
 
 
-@pytest.mark.parametrize("what", ["dir", "file", "metadata"])
-def test_unreadable_permissions(tmp_path: Path, what: str) -> None:
-    bag = _good(tmp_path)
-    tmp_path.chmod(0o755)
-    target = {"dir": bag, "file": next(bag.glob("*.mcap")), "metadata": bag / "metadata.yaml"}
-    target[what].chmod(0o000)
+@pytest.fixture
+def open_tmp() -> Iterator[Path]:
+    """A world-searchable temporary directory (pytest's tmp_path sits under a 0700 one)."""
+    path = Path(tempfile.mkdtemp(prefix="pmsm_bagio_"))
+    path.chmod(0o755)
     try:
-        out = _read_as_nobody(bag)
+        yield path
     finally:
-        target[what].chmod(0o755)
+        for p in (path, *path.rglob("*")):
+            p.chmod(0o755)
+        shutil.rmtree(path)
+
+
+@pytest.mark.parametrize("what", ["dir", "file", "metadata", "parent"])
+def test_unreadable_permissions(open_tmp: Path, what: str) -> None:
+    parent = open_tmp / "parent"
+    parent.mkdir()
+    bag = _good(parent)
+    target = {"dir": bag, "file": next(bag.glob("*.mcap")), "metadata": bag / "metadata.yaml",
+              "parent": parent}
+    target[what].chmod(0o000)
+    out = _read_as_nobody(bag)
     assert out.startswith(f"{bag}: permission denied"), out
     assert "\n" not in out
 

@@ -137,11 +137,15 @@ def open_reader(path: str | Path) -> Iterator[Any]:
 
 
 def _precheck(path: Path) -> None:
-    if not path.exists():
+    try:
+        exists, is_dir, is_file = path.exists(), path.is_dir(), path.is_file()
+    except PermissionError as exc:  # a parent directory cannot be searched
+        raise BagError(f"{path}: permission denied ({exc.filename or path})") from exc
+    if not exists:
         raise BagError(f"{path}: no such bag (directory or .mcap/.db3 file)")
-    if path.is_dir() and not os.access(path, os.R_OK | os.X_OK):
+    if is_dir and not os.access(path, os.R_OK | os.X_OK):
         raise BagError(f"{path}: permission denied")
-    if path.is_file() and path.suffix not in (".mcap", ".db3"):
+    if is_file and path.suffix not in (".mcap", ".db3"):
         raise BagError(f"{path}: not a rosbag2 directory or .mcap/.db3 file")
 
 
