@@ -111,6 +111,9 @@ def _print(res: dict[str, Any], out: TextIO) -> None:
         block = res[order]
         ridges = [r for r in block["ridges"] if r["sign"] > 0]
         label = order.upper() + (" ridges (slice f1 = f3)" if order == "h3" else " ridges")
+        if block.get("skipped"):
+            print(f"{label}: not computed (--orders)", file=out)
+            continue
         if block.get("zero"):
             print(f"{label}: none ({block['note']})", file=out)
             continue
@@ -118,6 +121,8 @@ def _print(res: dict[str, Any], out: TextIO) -> None:
         for r in ridges:
             print(f"  {r['kind']:<9} = +-{r['freq_norm']:.4f} cyc/sample = +-{r['freq_hz']:7.2f} Hz"
                   f"  level {r['level_db']:7.2f} dB  [{mark(r)}]", file=out)
+        if block.get("note"):
+            print(f"  note: {block['note']}", file=out)
     for e in res["eval"]:
         args = ", ".join(f"{f:g}" for f in e["f"])
         gain = "-inf" if e["gain_db"] is None else f"{e['gain_db']:.3f}"

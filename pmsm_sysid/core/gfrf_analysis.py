@@ -24,6 +24,7 @@ from .ridges import Peak, Ridge, h1_peaks, h2_ridges, h3_ridges
 
 MAX_AT_POINTS = 10_000
 MAX_REPORT_GRID = 512  # --grid N puts N x N dB values in the JSON: keep files reasonable
+WEAK_ERR = 1e-3  # nonlinear terms explaining less output variance: "weak" ridges
 
 
 @dataclass(frozen=True)
@@ -132,8 +133,17 @@ def _grid(g: Gfrf, n: int) -> dict[str, Any]:
             "h2_db": db(h2), "h3_slice_db": db(h3), "h3_slice": "H3(f1, f2, f1): rows f1"}
 
 
+def nonlinear_err(model: NarxModel) -> float | None:
+    """Sum of the ERR (seed Eq. 4) of the terms of degree >= 2: the share of the output
+    variance the nonlinear terms explain; None when the model carries no ERR values."""
+    errs = [float(e) for t, e in zip(model.terms, model.err, strict=True) if t.degree > 1]
+    if not errs:
+        return 0.0
+    return float(sum(errs)) if all(np.isfinite(errs)) else None
+
+
 def _higher(g: Gfrf, order: int, ridges: list[Ridge], ex: ExcitationSummary | None,
-            zero_note: str) -> dict[str, Any]:
+            zero_note: str, nl_err: float | None) -> dict[str, Any]:
     rows = [_ridge_row(r, ex) for r in ridges]
     zero = not ridges and _is_zero(g, order)
     out: dict[str, Any] = {"zero": zero, "ridges": rows}
@@ -141,6 +151,12 @@ def _higher(g: Gfrf, order: int, ridges: list[Ridge], ex: ExcitationSummary | No
         out["slice"] = "f1 = f3"
     if zero:
         out["note"] = zero_note
+    elif nl_err is not None and nl_err < WEAK_ERR:
+        out["note"] = (f"the nonlinear terms explain {100 * nl_err:.2g}% of the output "
+                       f"variance (sum of their ERR < {100 * WEAK_ERR:g}%): these ridges "
+                       "describe a weak nonlinearity at this excitation level; whether it is "
+                       "the plant's or fitted noise needs checking on independent data")
+    out["weak"] = bool(zero or (nl_err is not None and nl_err < WEAK_ERR))
     return out
 
 
@@ -185,20 +201,22 @@ def analyse(model: NarxModel, excitation: ExcitationSummary | None = None,
     evals = _evals(g, at)
     grid_out = _grid(g, grid) if grid is not None else None
     timing["total"] = 1e3 * (time.perf_counter() - t0)
+    nl = nonlinear_err(model)
     return GfrfAnalysis(
         sample_rate_hz=g.sample_rate_hz, stable=stable,
         poles=tuple((float(p.real), float(p.imag)) for p in pls),
         peaks=tuple(_peak_row(p, excitation) for p in peaks),
-        h2=_higher(g, 2, r2, excitation, "H2 = 0: the model has no term of degree >= 2")
+        h2=_higher(g, 2, r2, excitation, "H2 = 0: the model has no term of degree >= 2", nl)
         if 2 in orders else {"ridges": [], "skipped": True},
-        h3=_higher(g, 3, r3, excitation, "H3 = 0: no term of the model reaches third order")
+        h3=_higher(g, 3, r3, excitation, "H3 = 0: no term of the model reaches third order", nl)
         if 3 in orders else {"ridges": [], "skipped": True},
         identifiability=identifiability_block(excitation),
         evals=evals, grid=grid_out,
         warnings=tuple(_warnings(g, stable, model, excitation)),
         model_info={"input": model.input_name, "output": model.output_name,
                     "n_terms": len(model.terms),
-                    "nonlinear_terms": [t.name for t in model.terms if t.degree > 1]},
+                    "nonlinear_terms": [t.name for t in model.terms if t.degree > 1],
+                    "nonlinear_err": nl},
         timing_ms=timing,
     )
 

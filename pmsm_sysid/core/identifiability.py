@@ -60,6 +60,7 @@ class ExcitationSummary:
     sample_rate_hz: float
     resolution_hz: float = 0.0
     line_power_fraction: float = 0.0
+    rms: float = 0.0  # of the mean-removed input, in its own unit (N for thrust)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -71,6 +72,7 @@ class ExcitationSummary:
             "sample_rate_hz": float(self.sample_rate_hz),
             "resolution_hz": float(self.resolution_hz),
             "line_power_fraction": float(self.line_power_fraction),
+            "rms": float(self.rms),
         }
 
     @classmethod
@@ -87,6 +89,7 @@ class ExcitationSummary:
                 broadband=bool(d["broadband"]), n_lines=int(d.get("n_lines", 0)),
                 sample_rate_hz=fs, resolution_hz=float(d.get("resolution_hz", 0.0)),
                 line_power_fraction=float(d.get("line_power_fraction", 0.0)),
+                rms=float(d.get("rms", 0.0)),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise DataError(f"not an excitation summary: {exc!r}") from exc
@@ -187,6 +190,7 @@ def excitation_summary(
         band_hz=(lo, hi), band_norm=(lo / sample_rate_hz, hi / sample_rate_hz),
         tones_hz=tones, broadband=not tonal, n_lines=len(lines),
         sample_rate_hz=float(sample_rate_hz), resolution_hz=res, line_power_fraction=frac,
+        rms=float(np.sqrt(np.mean(x * x))),
     )
 
 
