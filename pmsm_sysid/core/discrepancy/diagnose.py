@@ -1,0 +1,251 @@
+"""Sim-to-real diagnosis: locate the mismatch, name the missing physics, model it, show it.
+
+1. **Locate** -- the equation-error residual of the nominal plant (:mod:`.kinematics`) is
+   described over time, position, velocity and frequency (:mod:`.locate`), and the library's
+   candidates are ranked by ERR on it (the position periodogram is the cogging scan).
+2. **Name** -- forward regression over the library (:mod:`.select`): ERR ranking (seed
+   Eq. 4), prewhitened F-tests with a Bonferroni correction for every candidate and pitch
+   searched, and a floor on the share of the mismatch explained.
+3. **Model** -- nonlinear refinement, look-alike disambiguation and held-out confirmation
+   (:mod:`.modelling`); the confirmed effects become the corrected plant.
+4. **Show** -- NRMSE of the force (equation error) and of a short-horizon speed replay
+   (output error, :mod:`.resim`) before/after, on estimation and held-out data, and the
+   correlation tests (seed Eq. 13) of the prewhitened residual before/after.
+
+Held-out data are ``validate`` when given; otherwise the last 30 % of the recording, and
+the confirmed effects' parameters are then re-estimated on the whole recording (the fit
+table keeps the estimation-only model, so its held-out numbers stay honest).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from ..errors import DiagnoseError, PlantError, SysIdError
+from ..plant import Plant
+from ..signals import Recording, check_finite
+from .estimate import Fit, contributions, design, refine
+from .kinematics import EquationData, FilterSpec, choose_filter, equation_data
+from .library import Effect
+from .modelling import Alternative, Model, confirmed_model
+from .result import Curves, DiagnoseResult, FoundEffect, capped
+from .select import ALPHA, MAX_EFFECTS, MIN_SHARE, Candidates, forward_select, score_step
+from .showfit import fit_table, scan_unexplained, where_table
+from .stats import ar_whitener, lstsq, whiten
+from .translate import corrected_plant, effect_params
+
+SPLIT = 0.7
+# which look-alike comparison (modelling.build_model) an effect's name belongs to
+_LOOKALIKE = {"thrust_lag": "thrust_lag", "transport_delay": "thrust_lag",
+              "stribeck_friction": "stribeck_friction", "coulomb_friction": "stribeck_friction"}
+
+
+@dataclass(frozen=True)
+class DiagnoseOptions:
+    """Thresholds of the method (defaults are the documented ones)."""
+
+    alpha: float = ALPHA
+    min_share: float = MIN_SHARE
+    split: float = SPLIT
+    max_effects: int = MAX_EFFECTS
+    replay: bool = True
+
+
+@dataclass(frozen=True)
+class Segments:
+    """Equation data of the estimation, held-out and (if split) whole recording."""
+
+    est: EquationData
+    val: EquationData
+    full: EquationData | None
+    recs: dict[str, Recording]
+
+
+def _filter_for(spec: FilterSpec, fs: float) -> FilterSpec:
+    """The same cut-off at another sample rate (decimation and edge recomputed)."""
+    return replace(spec, decimation=max(1, int(fs / (2.5 * spec.cutoff_hz))),
+                   edge=int(np.ceil(3.0 * fs / spec.cutoff_hz)))
+
+
+def segments(plant: Plant, real: Recording, validate: Recording | None,
+             split: float = SPLIT) -> Segments:
+    """Split (or pair) the recordings and build their equation-error data."""
+    for rec in (real, validate):
+        if rec is not None:
+            check_finite(rec)
+    if validate is None:
+        cut = int(split * len(real))
+        if cut < 10 or len(real) - cut < 10:
+            raise DiagnoseError(f"{len(real)} samples cannot be split for held-out data")
+        recs = {"estimation": real.window(0, cut), "validation": real.window(cut, len(real))}
+    else:
+        recs = {"estimation": real, "validation": validate}
+    spec = choose_filter(recs["estimation"].thrust, recs["estimation"].sample_rate_hz)
+    vspec = spec if recs["validation"].sample_rate_hz == recs["estimation"].sample_rate_hz \
+        else _filter_for(spec, recs["validation"].sample_rate_hz)
+    est = equation_data(plant, recs["estimation"], spec)
+    val = equation_data(plant, recs["validation"], vspec)
+    full = equation_data(plant, real, spec) if validate is None else None
+    return Segments(est, val, full, recs)
+
+
+def _drop_one(fit: Fit, data: EquationData, n_tests: float) -> list[float]:
+    """Significance (-log10 corrected p) of each effect given all the others."""
+    from scipy import stats
+
+    X, fixed = design(fit.effects, data)
+    r = data.y - fixed - X @ fit.beta
+    poly = ar_whitener(r)
+    sse1 = float(np.sum(whiten(poly, r) ** 2))
+    dof = max(1, len(r) - X.shape[1] - len(fit.eta))
+    out = []
+    for k in range(len(fit.effects)):
+        rest = fit.effects[:k] + fit.effects[k + 1:]
+        Xr, fr = design(rest, data)
+        _, r0 = lstsq(whiten(poly, Xr), whiten(poly, data.y - fr))
+        q = max(1, fit.effects[k].width)
+        f = max(0.0, (float(r0 @ r0) - sse1) / q) / (sse1 / dof)
+        out.append(capped(float(stats.f.logsf(f, q, dof)) / np.log(10.0)
+                          + np.log10(max(n_tests, 1.0))))
+    return out
+
+
+def _shares(fit: Fit, data: EquationData) -> list[float]:
+    """Sequential share of the mismatch energy (ERR in the selection order)."""
+    yy = float(data.y @ data.y)
+    prev = yy
+    out = []
+    for k in range(1, len(fit.effects) + 1):
+        X, fixed = design(fit.effects[:k], data)
+        _, r = lstsq(X, data.y - fixed)
+        sse = float(r @ r)
+        out.append(max(0.0, (prev - sse) / yy))
+        prev = sse
+    return out
+
+
+def _confidence(sig: float, held: Any, alt: Alternative | None, alpha: float) -> str:
+    tie = alt is not None and abs(alt.delta_chi2) < 3.84
+    if held is not None and held.p_value < 1e-3 and sig >= 10.0 and not tie:
+        return "high"
+    if sig >= -np.log10(alpha):
+        return "moderate"
+    return "low"
+
+
+def _named(fit: Fit, data: EquationData, plant: Plant, held: list[Any],
+           alts: dict[str, Alternative], n_tests: float, opts: DiagnoseOptions,
+           ) -> list[FoundEffect]:
+    sigs = _drop_one(fit, data, n_tests)
+    shares = _shares(fit, data)
+    out = []
+    for k, e in enumerate(fit.effects):
+        params, std = effect_params(fit, k, plant)
+        alt = alts.get(_LOOKALIKE.get(e.name, ""))
+        notes = []
+        alt_d = None
+        if alt is not None and alt.name != e.name:
+            alt_d = alt.to_dict()
+            if abs(alt.delta_chi2) < 3.84:
+                notes.append(f"indistinguishable from {alt.name} in these data "
+                             f"(Δχ² = {alt.delta_chi2:.2f} < 3.84)")
+        out.append(FoundEffect(e.name, params, std, sigs[k], shares[k], held[k],
+                               _confidence(sigs[k], held[k], alt, opts.alpha), tuple(notes),
+                               alt_d))
+    return out
+
+
+def _correct(plant: Plant, found: list[FoundEffect]) -> tuple[Plant, list[str]]:
+    try:
+        return corrected_plant(plant, [(e.name, e.params) for e in found
+                                       if e.name != "unexplained"])
+    except PlantError as exc:
+        return plant, [f"the corrected plant is not valid ({exc}); the nominal one is kept"]
+
+
+def _curves(segs: Segments, fit: Fit, replays: dict[str, Any]) -> Curves:
+    from .kinematics import thinned, thinned_times
+
+    c = Curves()
+    for name, d in (("estimation", segs.est), ("validation", segs.val)):
+        parts = contributions(fit, d)
+        c.t[name], c.x[name], c.v[name] = thinned_times(d), thinned(d, d.x), thinned(d, d.v)
+        c.before[name] = d.y
+        c.after[name] = d.y - (np.sum(parts, axis=0) if parts else 0.0)
+        c.parts[name] = [(e.name, p) for e, p in zip(fit.effects, parts, strict=True)]
+    c.replay.update(replays)
+    return c
+
+
+def diagnose(plant: Plant, real: Recording, validate: Recording | None = None,
+             options: DiagnoseOptions | None = None) -> DiagnoseResult:
+    """The whole method of the module doc; raises DiagnoseError on unusable input."""
+    opts = options or DiagnoseOptions()
+    try:
+        return _diagnose(plant, real, validate, opts)
+    except SysIdError:
+        raise
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        raise DiagnoseError(f"diagnosis failed on these data: {exc}") from exc
+
+
+def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
+              opts: DiagnoseOptions) -> DiagnoseResult:
+    segs = segments(plant, real, validate, opts.split)
+    cands = Candidates.build(segs.est)
+    n_tests = sum(f.n_independent for f in cands.families)
+    ranking = score_step(segs.est, cands, [], opts.alpha, opts.min_share)
+    steps, _ = forward_select(segs.est, cands, opts.alpha, opts.min_share, opts.max_effects)
+    model, held, dropped = confirmed_model(tuple(s.effect for s in steps), segs.est,
+                                           segs.val, opts.alpha)
+    final, fdata = _final(model, segs)
+    found = _named(final, fdata, plant, list(held), model.alternatives, n_tests, opts)
+    found += scan_unexplained(final, fdata, opts.alpha, opts.min_share)
+    corrected, notes = _correct(plant, found)
+    est_plant, _ = _correct(plant, _named(model.fit, segs.est, plant, list(held),
+                                          model.alternatives, n_tests, opts))
+    table, replays = fit_table(plant, est_plant, model.fit, segs, opts.replay)
+    notes += [f"{e.label()} was significant on the estimation data but not confirmed on "
+              "held-out data; it is not reported" for e in dropped]
+    method = _method(segs, opts, n_tests, validate is not None)
+    return DiagnoseResult(
+        plant=plant, corrected=corrected, effects=tuple(found),
+        where=tuple(where_table(segs.est, ranking)), nrmse_before=table["estimation"]
+        ["nrmse_before"], fit=table, candidates=tuple(_rank_dict(s) for s in ranking),
+        method=method, notes=tuple(notes), curves=_curves(segs, model.fit, replays))
+
+
+def _final(model: Model, segs: Segments) -> tuple[Fit, EquationData]:
+    """The confirmed model re-estimated on the whole recording when it was split."""
+    if segs.full is None or not model.fit.effects:
+        return model.fit, segs.est
+    X, fixed = design(model.fit.effects, segs.full)
+    _, r = lstsq(X, segs.full.y - fixed)
+    return refine(model.fit.effects, segs.full, ar_whitener(r)), segs.full
+
+
+def _rank_dict(s: Any) -> dict[str, Any]:
+    return {"candidate": s.effect.label(), "name": s.effect.name, "err": s.err,
+            "share": s.share, "significance": capped(s.test.corrected_log10_p(s.n_tests))}
+
+
+def _method(segs: Segments, opts: DiagnoseOptions, n_tests: float,
+            has_validate: bool) -> dict[str, Any]:
+    return {
+        "residual": "equation error (inverse dynamics), parallel-filtered",
+        "speed_source": "measured" if segs.est.mode == "speed" else "derived from position",
+        "filter": segs.est.filt.to_dict(),
+        "regression_samples": {"estimation": segs.est.n, "validation": segs.val.n},
+        "held_out": "--validate recording" if has_validate
+        else f"last {1 - opts.split:.0%} of the recording",
+        "parameters_from": "estimation recording" if has_validate else "whole recording",
+        "alpha": opts.alpha, "min_share": opts.min_share, "tests_searched": n_tests,
+        "significance": "-log10 of the Bonferroni-corrected p-value (prewhitened F-test)",
+        "sign_smoothing_mps": segs.est.sign_smoothing_mps,
+    }
+
+
+__all__ = ["DiagnoseOptions", "DiagnoseResult", "Effect", "diagnose"]

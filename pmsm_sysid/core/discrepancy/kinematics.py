@@ -1,0 +1,318 @@
+"""Equation-error data: the force residual of inverse dynamics, parallel-filtered.
+
+The nominal plant says ``F_eff = M a + B v + F_effects(x, v, F_eff)`` (the sign convention of
+:mod:`pmsm_sysid.core.physics`), so the force residual ``r = F - M a - B v - F_effects`` is
+exactly the force of whatever the plant leaves out. It needs the acceleration, which is the
+reason for the care below (the IDIM-LS practice of the EMPS benchmark):
+
+* **Timing (contract §1).** The thrust stamped t_k is held over [t_k, t_{k+1}). With a measured
+  speed, interval k pairs ``F(k)`` with ``a_k = (v_{k+1} - v_k)/T`` and ``v̄_k`` -- for the
+  rigid mass-damper the inversion ``F(k) = c1 v_{k+1} - c0 v_k`` is exact under zero-order
+  hold. With position only (speed derived, as in EMPS), sample j pairs the central second
+  difference of position with the mean thrust ``(F(j-1) + F(j))/2`` of the two intervals it
+  spans.
+* **Parallel filtering.** The residual and every regressor go through the same zero-phase
+  Butterworth low-pass L (order 4, ``sosfiltfilt``). L is linear and time-invariant, so
+  ``L r = Σ θ_i L φ_i`` holds exactly whatever the cut-off: filtering trades noise for
+  bandwidth but adds no bias. Nonlinear regressors are evaluated on the smoothed states.
+* **Cut-off from the data's bandwidth.** ``fc = 4 · f99`` where f99 is the frequency below
+  which 99 % of the power of the (mean-removed) thrust lies, clipped to [0.02, 0.2]·fs. The
+  motion and the effects it drives live at the thrust's frequencies and their low harmonics;
+  above a few times f99 the residual is differentiated measurement noise, which grows as f².
+* **Decimation.** After L, every D-th sample is kept, D = floor(fs / (2.5 fc)), and
+  ``ceil(3 fs / fc)`` samples are dropped at each end (filter start-up).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import butter, lfilter, sosfiltfilt
+from scipy.special import erf
+
+from ..errors import DiagnoseError
+from ..physics import effects_force
+from ..plant import SIGN_SMOOTHING_MPS, Plant
+from ..signals import Recording
+
+FloatArray = NDArray[np.float64]
+
+FILTER_ORDER = 4
+POWER_FRACTION = 0.99
+CUTOFF_FACTOR = 4.0
+MIN_SAMPLES = 200
+
+
+@dataclass(frozen=True)
+class FilterSpec:
+    """The parallel filter: Butterworth cut-off, decimation and trimmed edge (samples)."""
+
+    cutoff_hz: float
+    band_hz: float
+    decimation: int
+    edge: int
+    order: int = FILTER_ORDER
+
+    def to_dict(self) -> dict[str, float | int | str]:
+        return {"cutoff_hz": self.cutoff_hz, "thrust_band_hz": self.band_hz,
+                "decimation": self.decimation, "edge_samples": self.edge,
+                "order": self.order, "kind": "butterworth zero-phase (sosfiltfilt)"}
+
+
+def choose_filter(thrust: FloatArray, fs: float) -> FilterSpec:
+    """Cut-off from the thrust's 99 % power bandwidth (module doc)."""
+    u = np.asarray(thrust, dtype=np.float64) - float(np.mean(thrust))
+    power = np.abs(np.fft.rfft(u)) ** 2
+    freqs = np.fft.rfftfreq(len(u), 1.0 / fs)
+    total = float(power.sum())
+    if total <= 0.0:
+        raise DiagnoseError("the thrust is constant: nothing excites the plant")
+    cum = np.cumsum(power) / total
+    band = float(freqs[int(np.searchsorted(cum, POWER_FRACTION))])
+    fc = min(max(CUTOFF_FACTOR * band, 0.02 * fs), 0.2 * fs)
+    decim = max(1, math.floor(fs / (2.5 * fc)))
+    edge = math.ceil(3.0 * fs / fc)
+    return FilterSpec(cutoff_hz=fc, band_hz=band, decimation=decim, edge=edge)
+
+
+def interval_force(cmd: FloatArray, period: float, tau: float = 0.0,
+                   delay: float = 0.0) -> FloatArray:
+    """Mean force over each sample interval for a ZOH command through a delay and a lag.
+
+    The command ``cmd[k]`` is held over [kT, (k+1)T); the force follows it ``delay`` later
+    through ``tau dF/dt = cmd - F`` (both exact, as in the simulator). Returns the interval
+    means, which is what the velocity increment of interval k integrates. Before the start
+    the command is taken as ``cmd[0]`` (a settled force).
+    """
+    c = np.asarray(cmd, dtype=np.float64)
+    m = math.floor(delay / period + 1e-9)
+    r = delay - m * period
+    r = 0.0 if r <= 1e-9 * period else r
+    pad = np.concatenate([np.full(m + 1, c[0]), c])
+    c2 = pad[1:len(c) + 1]  # command in force after the switch (k - m)
+    c1 = pad[:len(c)]  # command before the switch (k - m - 1)
+    if tau <= 0.0:
+        out: FloatArray = (c1 * r + c2 * (period - r)) / period
+        return out
+    a1, a2 = math.exp(-r / tau), math.exp(-(period - r) / tau)
+    drive = (1.0 - a1) * a2 * c1 + (1.0 - a2) * c2
+    z0 = c[0]
+    z_next = lfilter([1.0], [1.0, -a1 * a2], drive, zi=[a1 * a2 * z0])[0]
+    z = np.concatenate([[z0], z_next[:-1]])  # force at the start of each interval
+    z_mid = c1 + (z - c1) * a1
+    integral = c1 * r + (z - c1) * tau * (1 - a1) + c2 * (period - r) \
+        + (z_mid - c2) * tau * (1 - a2)
+    res: FloatArray = integral / period
+    return res
+
+
+def smooth_sign(v: FloatArray, smoothing: float = SIGN_SMOOTHING_MPS) -> FloatArray:
+    """sign(v) regularised as tanh(v / smoothing), the simulator's convention."""
+    out: FloatArray = np.tanh(np.asarray(v) / smoothing)
+    return out
+
+
+def smooth_abs(v: FloatArray, smoothing: float) -> FloatArray:
+    """smoothing * log cosh(v / smoothing): |v| rounded off, the antiderivative of tanh."""
+    z = np.abs(np.asarray(v, dtype=np.float64)) / smoothing
+    out: FloatArray = smoothing * (z + np.log1p(np.exp(-2.0 * z)) - math.log(2.0))
+    return out
+
+
+def interval_friction(v_lo: FloatArray, v_hi: FloatArray, smoothing: float,
+                      stribeck_mps: float = 0.0) -> FloatArray:
+    """Mean of sign(v) (or of the Stribeck hump exp(-(v/vs)²) sign(v)) over an interval.
+
+    The speed is taken linear between its values at the interval's ends, so the mean is
+    ``(G(v_hi) - G(v_lo)) / (v_hi - v_lo)`` with G the antiderivative: ``smooth_abs`` for
+    Coulomb, ``sqrt(pi)/2 vs erf(smooth_abs/vs)`` for Stribeck. A reversal inside an interval
+    then counts for the fraction of the interval spent on each side, as the simulator's
+    force does, instead of switching at the sample.
+    """
+    def anti(v: FloatArray) -> FloatArray:
+        s = smooth_abs(v, smoothing)
+        if stribeck_mps <= 0:
+            return s
+        out: FloatArray = 0.5 * math.sqrt(math.pi) * stribeck_mps * erf(s / stribeck_mps)
+        return out
+
+    mid = 0.5 * (v_lo + v_hi)
+    point = smooth_sign(mid, smoothing)
+    if stribeck_mps > 0:
+        point = point * np.exp(-((mid / stribeck_mps) ** 2))
+    dv = v_hi - v_lo
+    small = np.abs(dv) < 1e-6 * smoothing
+    safe = np.where(small, 1.0, dv)
+    out: FloatArray = np.where(small, point, (anti(v_hi) - anti(v_lo)) / safe)
+    return out
+
+
+def smoothed_speed_noise(rec: Recording, mode: str, sos: FloatArray) -> float:
+    """Standard deviation (m/s) of the measurement noise left in the smoothed speed.
+
+    The raw noise is read above 0.3 fs, where a servo's motion has no power (the white-noise
+    fraction there is 0.4), and carried through the exact linear operations that make the
+    smoothed speed (interval mean or central difference, then the filter L).
+    """
+    fs = rec.sample_rate_hz
+    raw = rec.speed if mode == "speed" else rec.position
+    hp = butter(4, 0.3 * fs, btype="highpass", fs=fs, output="sos")
+    sigma = float(np.std(sosfiltfilt(hp, raw)[20:-20])) / math.sqrt(0.4)
+    imp = np.zeros(2049)
+    imp[1024] = 1.0
+    op = 0.5 * (imp[1:] + imp[:-1]) if mode == "speed" else 0.5 * fs * (imp[2:] - imp[:-2])
+    gain = float(np.linalg.norm(sosfiltfilt(sos, op)))
+    return sigma * gain
+
+
+def sign_smoothing(noise_std: float) -> float:
+    """Width of E[sign(v) | smoothed v]: the simulator's tanh width and the noise combined.
+
+    tanh(x/w) matches erf(x/(sqrt(2) s)) for w = sqrt(pi/2) s = 1.2533 s; widths add in
+    quadrature. Without this, noise makes sign(v) wrong near v = 0 and a spurious
+    low-speed (Stribeck-like) term appears.
+    """
+    return math.hypot(SIGN_SMOOTHING_MPS, math.sqrt(math.pi / 2.0) * noise_std)
+
+
+@dataclass(frozen=True)
+class EquationData:
+    """One contiguous segment prepared for equation-error regression.
+
+    Full-rate arrays (one per equation instant, see module doc): ``x``, ``v``, ``a`` are the
+    smoothed states used as regressor arguments, ``v_lo``/``v_hi`` the smoothed speed at the
+    two ends of the sample interval each instant averages over; ``cmd`` is the thrust
+    command per interval and ``force`` the nominal plant's applied force paired with each
+    instant. ``y`` is the
+    filtered, trimmed and decimated residual; ``project`` maps any full-rate column the same
+    way, so regressors and residual stay consistent.
+    """
+
+    x: FloatArray
+    v: FloatArray
+    v_lo: FloatArray
+    v_hi: FloatArray
+    a: FloatArray
+    v_raw: FloatArray
+    a_raw: FloatArray
+    cmd: FloatArray
+    force: FloatArray
+    residual_raw: FloatArray
+    y: FloatArray
+    t: FloatArray
+    period: float
+    mode: str
+    filt: FilterSpec
+    sos: FloatArray
+    speed_noise_mps: float = 0.0
+    sign_smoothing_mps: float = SIGN_SMOOTHING_MPS
+
+    @property
+    def n(self) -> int:
+        return len(self.y)
+
+    @property
+    def sample_rate_hz(self) -> float:
+        """Rate of the regression samples (after decimation)."""
+        return 1.0 / (self.period * self.filt.decimation)
+
+    def project(self, col: FloatArray) -> FloatArray:
+        """L-filter, trim and decimate a full-rate column (or the columns of a 2-D array)."""
+        arr = np.asarray(col, dtype=np.float64)
+        f = sosfiltfilt(self.sos, arr, axis=0)
+        e, d = self.filt.edge, self.filt.decimation
+        out: FloatArray = np.ascontiguousarray(f[e:len(f) - e:d])
+        return out
+
+    def pair(self, per_interval: FloatArray) -> FloatArray:
+        """Map a per-interval quantity (mean over [t_k, t_k+1)) to the equation instants."""
+        q = np.asarray(per_interval, dtype=np.float64)
+        if self.mode == "speed":
+            return q[:-1]
+        out: FloatArray = 0.5 * (q[:-2] + q[1:-1])
+        return out
+
+    def forced(self, tau: float = 0.0, delay: float = 0.0) -> FloatArray:
+        """Applied force at the equation instants for a lag/delay on the command."""
+        return self.pair(interval_force(self.cmd, self.period, tau, delay))
+
+
+def _nominal_dynamics(plant: Plant, rec: Recording, mode: str) -> tuple[FloatArray, ...]:
+    """(x, v, a, M a + B v exact) at the equation instants of ``mode`` (module doc)."""
+    T = 1.0 / rec.sample_rate_hz
+    m, b = plant.mass_kg, plant.viscous_n_per_mps
+    x = rec.position
+    if mode == "speed":
+        v = rec.speed
+        a = np.diff(v) / T
+        beta = b * T / m
+        if beta > 1e-9:
+            alpha = math.exp(-beta)
+            c1, c0 = b / (1 - alpha), b * alpha / (1 - alpha)
+        else:
+            c1 = c0 = m / T
+        inertial = c1 * v[1:] - c0 * v[:-1]
+        return 0.5 * (x[1:] + x[:-1]), 0.5 * (v[1:] + v[:-1]), a, inertial
+    vbar = np.diff(x) / T
+    a = np.diff(vbar) / T
+    vc = 0.5 * (vbar[1:] + vbar[:-1])
+    return x[1:-1], vc, a, m * a + b * vc
+
+
+def _interval_ends(rec: Recording, mode: str, sos: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Smoothed speed at the start and end of the interval each equation instant covers."""
+    if mode == "speed":
+        vs = sosfiltfilt(sos, rec.speed)
+        return vs[:-1], vs[1:]
+    vbar = sosfiltfilt(sos, np.diff(rec.position) * rec.sample_rate_hz)
+    return vbar[:-1], vbar[1:]
+
+
+def equation_data(plant: Plant, rec: Recording, filt: FilterSpec | None = None,
+                  mode: str | None = None) -> EquationData:
+    """Build the residual of ``plant`` on ``rec`` (effects already in the plant included)."""
+    fs = rec.sample_rate_hz  # the data's rate; the plant's own rate plays no part here
+    mode = mode or ("position" if rec.speed_derived else "speed")
+    if mode not in ("speed", "position"):
+        raise DiagnoseError(f"unknown equation mode '{mode}'")
+    spec = filt or choose_filter(rec.thrust, fs)
+    if len(rec) < max(MIN_SAMPLES, 4 * spec.edge):
+        raise DiagnoseError(f"{len(rec)} samples are too few for the equation error "
+                            f"(need {max(MIN_SAMPLES, 4 * spec.edge)} at {fs:g} Hz)")
+    sos = np.asarray(butter(spec.order, spec.cutoff_hz, fs=fs, output="sos"), dtype=np.float64)
+    x, v, a, inertial = _nominal_dynamics(plant, rec, mode)
+    tau = plant.thrust_lag.tau_s if plant.thrust_lag is not None else 0.0
+    delay = plant.transport_delay.delay_s if plant.transport_delay is not None else 0.0
+    T = 1.0 / fs
+    cmd = np.asarray(rec.thrust, dtype=np.float64)
+    ifor = interval_force(cmd, T, tau, delay)
+    force = ifor[:-1] if mode == "speed" else 0.5 * (ifor[:-2] + ifor[1:-1])
+    xs, vs, as_ = (sosfiltfilt(sos, s) for s in (x, v, a))
+    v_lo, v_hi = _interval_ends(rec, mode, sos)
+    resid = force - inertial - effects_force(plant, xs, vs, force)
+    t = rec.t[:-1] if mode == "speed" else rec.t[1:-1]
+    y = np.ascontiguousarray(sosfiltfilt(sos, resid)[spec.edge:len(resid) - spec.edge:
+                                                      spec.decimation])
+    noise = smoothed_speed_noise(rec, mode, sos)
+    return EquationData(x=xs, v=vs, v_lo=v_lo, v_hi=v_hi, a=as_, v_raw=v, a_raw=a, cmd=cmd,
+                        force=force,
+                        residual_raw=resid, y=y, t=t, period=T, mode=mode,
+                        filt=spec, sos=sos, speed_noise_mps=noise,
+                        sign_smoothing_mps=sign_smoothing(noise))
+
+
+def thinned_times(data: EquationData) -> FloatArray:
+    """Time stamps of the regression samples (trimmed and decimated like ``y``)."""
+    e, d = data.filt.edge, data.filt.decimation
+    out: FloatArray = data.t[e:len(data.t) - e:d]
+    return out
+
+
+def thinned(data: EquationData, arr: FloatArray) -> FloatArray:
+    """Trim and decimate a full-rate array without filtering (states for plots, bins)."""
+    e, d = data.filt.edge, data.filt.decimation
+    out: FloatArray = np.asarray(arr)[e:len(arr) - e:d]
+    return out

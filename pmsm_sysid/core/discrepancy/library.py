@@ -1,0 +1,224 @@
+"""The library of interpretable effects, with the contract's names (contract §3).
+
+Each effect is a force the nominal plant leaves out, written in the inverse-dynamics sign
+``F = M a + B v + F_effects`` of :mod:`pmsm_sysid.core.physics`, so a regressor's coefficient
+is directly the effect's parameter:
+
+=====================  ==========================================  ==========================
+effect                 regressor(s) on the smoothed states          coefficient(s)
+=====================  ==========================================  ==========================
+force_offset           1                                            offset (N)
+coulomb_friction       sign(v)                                      Fc (N)
+stribeck_friction      exp(-(v/vs)²) sign(v), vs on a grid          static_n (N)
+viscous_error          v                                            ΔB (N s/m)
+mass_error             a                                            ΔM (kg)
+spring                 x                                            k (N/m)
+cogging                sin, cos(2π h x/p), pitch p on a grid        A_h cos φ_h, A_h sin φ_h
+thrust_ripple          F sin, F cos(2π x/p), p on a grid            -r cos φ, -r sin φ
+thrust_lag             (F(k) - F(k-1))/T  (detection)               τ (or a delay, same order)
+=====================  ==========================================  ==========================
+
+A thrust lag and a transport delay shorter than a sample both act, to first order, as
+``τ dF/dt``; the detection regressor stands for both and :mod:`.estimate` tells them apart
+(exactly, through :func:`.kinematics.interval_force`) as far as the data allow.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import DiagnoseError
+from .kinematics import EquationData, interval_friction, thinned
+
+FloatArray = NDArray[np.float64]
+
+FIXED = ("force_offset", "coulomb_friction", "viscous_error", "mass_error", "spring",
+         "thrust_lag")
+GRIDDED = ("cogging", "thrust_ripple", "stribeck_friction")
+EFFECT_NAMES = FIXED + GRIDDED + ("transport_delay",)
+
+OVERSAMPLE = 4  # grid points per independent wavenumber / Stribeck velocity
+MAX_CYCLE_HZ_FACTOR = 1.0  # a position period must pass the filter at the median speed
+CHUNK = 96  # columns filtered at a time (memory)
+MAX_PITCHES = 400
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One candidate: a library name plus its nonlinear parameter (pitch, vs, τ or delay)."""
+
+    name: str
+    pitch_m: float = 0.0
+    velocity_mps: float = 0.0
+    orders: tuple[int, ...] = (1,)
+    tau_s: float = -1.0  # < 0: the linear detection regressor; >= 0: exact lag of tau_s
+    delay_s: float = -1.0
+
+    @property
+    def dynamic(self) -> bool:
+        """True when the effect is an exact lag/delay (no free linear coefficient)."""
+        return self.tau_s >= 0.0 or self.delay_s >= 0.0
+
+    @property
+    def width(self) -> int:
+        """Number of linear coefficients."""
+        if self.dynamic:
+            return 0
+        if self.name in ("cogging",):
+            return 2 * len(self.orders)
+        return 2 if self.name == "thrust_ripple" else 1
+
+    def label(self) -> str:
+        if self.name == "cogging":
+            return f"cogging(p={self.pitch_m * 1e3:.3f} mm, h={list(self.orders)})"
+        if self.name == "thrust_ripple":
+            return f"thrust_ripple(p={self.pitch_m * 1e3:.3f} mm)"
+        if self.name == "stribeck_friction":
+            return f"stribeck_friction(vs={self.velocity_mps * 1e3:.2f} mm/s)"
+        if self.tau_s >= 0:
+            return f"thrust_lag(tau={self.tau_s * 1e3:.3f} ms)"
+        if self.delay_s >= 0:
+            return f"transport_delay(d={self.delay_s * 1e3:.3f} ms)"
+        return self.name
+
+
+def raw_columns(e: Effect, data: EquationData) -> FloatArray:
+    """Full-rate regressor columns of ``e`` (before parallel filtering), shape (N, width)."""
+    x, _v = data.x, data.v
+    if e.name == "force_offset":
+        return np.ones((len(x), 1))
+    if e.name == "coulomb_friction":
+        return interval_friction(data.v_lo, data.v_hi, data.sign_smoothing_mps)[:, None]
+    if e.name == "stribeck_friction":
+        return interval_friction(data.v_lo, data.v_hi, data.sign_smoothing_mps,
+                                 e.velocity_mps)[:, None]
+    if e.name == "viscous_error":
+        return data.v_raw[:, None]
+    if e.name == "mass_error":
+        return data.a_raw[:, None]
+    if e.name == "spring":
+        return x[:, None]
+    if e.name == "cogging":
+        k = 2.0 * math.pi / e.pitch_m
+        cols = []
+        for h in e.orders:
+            g = _travel_average(data, h / e.pitch_m)
+            cols += [g * np.sin(h * k * x), g * np.cos(h * k * x)]
+        return np.column_stack(cols)
+    if e.name == "thrust_ripple":
+        k = 2.0 * math.pi / e.pitch_m
+        g = _travel_average(data, 1.0 / e.pitch_m) * data.force
+        return np.column_stack([g * np.sin(k * x), g * np.cos(k * x)])
+    if e.name == "thrust_lag" and not e.dynamic:
+        d = np.diff(data.cmd, prepend=data.cmd[0]) / data.period
+        return data.pair(d)[:, None]
+    raise DiagnoseError(f"effect '{e.name}' has no linear regressor")
+
+
+def _travel_average(data: EquationData, wavenumber: float) -> FloatArray:
+    """Gain of averaging sin(2π κ x) over the travel of one equation instant.
+
+    The force a position-periodic effect exerts varies within a sample interval as the
+    mover travels Δx = v T; its mean over the interval is the value at the midpoint times
+    sinc(κ Δx) (x linear in time). Position-mode instants average two intervals with
+    triangular weights, whose gain is sinc².
+    """
+    g = np.asarray(np.sinc(wavenumber * data.v * data.period), dtype=np.float64)
+    out: FloatArray = g if data.mode == "speed" else g * g
+    return out
+
+
+def dynamic_part(e: Effect, data: EquationData) -> FloatArray:
+    """Residual force of an exact lag/delay: nominal applied force minus the delayed one."""
+    tau = max(e.tau_s, 0.0)
+    delay = max(e.delay_s, 0.0)
+    return data.project(data.force - data.forced(tau, delay))
+
+
+def columns(e: Effect, data: EquationData) -> FloatArray:
+    """Parallel-filtered regressor columns of ``e`` (n × width)."""
+    return data.project(raw_columns(e, data))
+
+
+@dataclass(frozen=True)
+class Family:
+    """The candidates of one effect name, with the number of independent tests it holds."""
+
+    name: str
+    members: tuple[Effect, ...]
+    n_independent: float
+
+
+def pitch_grid(data: EquationData) -> tuple[FloatArray, float]:
+    """Candidate pitches (m) and the number of independent ones.
+
+    Wavenumbers 1/p from 2/R (two periods over the travel R) to fc/median|v| (a period is
+    crossed slower than the filter's cut-off at the median speed), spaced 1/(4R): four-fold
+    oversampling of the independent Fourier wavenumbers 1/R. Long travels would need more
+    than ``MAX_PITCHES`` points: the spacing is then relaxed to 1/(2R) and, if still too
+    many, the shortest pitches are left out (the searched range is reported).
+    """
+    xs = thinned(data, data.x)
+    travel = float(np.ptp(xs))
+    vmed = float(np.median(np.abs(thinned(data, data.v))))
+    if travel <= 0 or vmed <= 0:
+        return np.zeros(0), 0.0
+    k_lo = 2.0 / travel
+    k_hi = MAX_CYCLE_HZ_FACTOR * data.filt.cutoff_hz / vmed
+    over = OVERSAMPLE
+    if (k_hi - k_lo) * travel * over > MAX_PITCHES:
+        over = 2
+        k_hi = min(k_hi, k_lo + MAX_PITCHES / (over * travel))
+    if k_hi <= k_lo:
+        return np.zeros(0), 0.0
+    ks = np.arange(k_lo, k_hi, 1.0 / (over * travel))
+    pitches = np.asarray(1.0 / ks, dtype=np.float64)
+    return pitches, (k_hi - k_lo) * travel
+
+
+def stribeck_grid(data: EquationData) -> tuple[FloatArray, float]:
+    """Stribeck velocities, log-spaced from 3 smoothing widths to half the speed range."""
+    vmax = float(np.quantile(np.abs(thinned(data, data.v)), 0.95))
+    lo, hi = 3e-3, 0.5 * vmax
+    if hi <= lo:
+        return np.zeros(0), 0.0
+    n = max(2, math.ceil(OVERSAMPLE * math.log2(hi / lo)))
+    return np.geomspace(lo, hi, n), n / OVERSAMPLE
+
+
+def families(data: EquationData, exclude: tuple[str, ...] = ()) -> list[Family]:
+    """All candidate families on ``data`` (minus ``exclude``)."""
+    out = [Family(n, (Effect(n),), 1.0) for n in FIXED if n not in exclude]
+    pitches, n_p = pitch_grid(data)
+    if len(pitches):
+        for name in ("cogging", "thrust_ripple"):
+            if name not in exclude:
+                out.append(Family(name, tuple(Effect(name, pitch_m=float(p)) for p in pitches),
+                                  max(n_p, 1.0)))
+    vs, n_v = stribeck_grid(data)
+    if len(vs) and "stribeck_friction" not in exclude:
+        out.append(Family("stribeck_friction",
+                          tuple(Effect("stribeck_friction", velocity_mps=float(s)) for s in vs),
+                          max(n_v, 1.0)))
+    return out
+
+
+def family_columns(fam: Family, data: EquationData) -> FloatArray:
+    """Filtered columns of every member, shape (members, n, width)."""
+    width = fam.members[0].width
+    out = np.empty((len(fam.members), data.n, width))
+    for start, chunk in _chunks(fam.members, max(1, CHUNK // width)):
+        raw = np.concatenate([raw_columns(e, data) for e in chunk], axis=1)
+        proj = data.project(raw)
+        out[start:start + len(chunk)] = proj.reshape(data.n, len(chunk), width).transpose(1, 0, 2)
+    return out
+
+
+def _chunks(seq: tuple[Effect, ...], size: int) -> Iterator[tuple[int, tuple[Effect, ...]]]:
+    for i in range(0, len(seq), size):
+        yield i, seq[i:i + size]

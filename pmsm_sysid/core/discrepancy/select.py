@@ -1,0 +1,138 @@
+"""Forward regression over the effect library, ranked by ERR (seed Eq. 4), with significance.
+
+At each step every candidate group (one effect: one column, or a sin/cos pair per harmonic)
+is orthogonalised against the effects chosen so far and scored by its error reduction ratio
+``ERR_g = ||P_g y||² / ||y||²`` -- Eq. 4 with the group's orthogonal columns summed, and with
+the mean kept in ``y`` so that a force offset can be found. The best member of each family
+(best pitch, best Stribeck velocity) is then put to a nested F-test after AR prewhitening
+(:mod:`.stats`), Bonferroni-corrected for every candidate still in the library (each
+independent pitch and Stribeck velocity counts as one test). Among the families that pass
+``p < alpha`` and explain at least ``min_share`` of the mismatch energy, the one with the
+largest ERR is accepted; the search stops when none passes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .kinematics import EquationData
+from .library import Effect, Family, columns, families, family_columns
+from .stats import NestedTest, lstsq, nested_f_test
+
+FloatArray = NDArray[np.float64]
+
+ALPHA = 1e-3
+MIN_SHARE = 0.01
+MAX_EFFECTS = 6
+
+
+@dataclass(frozen=True)
+class Step:
+    """One accepted (or the first refused) step of the forward regression."""
+
+    effect: Effect
+    err: float
+    share: float
+    test: NestedTest
+    n_tests: float
+    accepted: bool
+
+    @property
+    def significance(self) -> float:
+        """-log10 of the Bonferroni-corrected p-value."""
+        return -self.test.corrected_log10_p(self.n_tests)
+
+
+@dataclass(frozen=True)
+class Candidates:
+    """Families with their filtered columns (float32 cache) and Gram blocks on one segment."""
+
+    families: tuple[Family, ...]
+    cols: tuple[NDArray[np.float32], ...]
+    grams: tuple[FloatArray, ...]
+    gys: tuple[FloatArray, ...]
+
+    @classmethod
+    def build(cls, data: EquationData, exclude: tuple[str, ...] = ()) -> Candidates:
+        fams = tuple(families(data, exclude))
+        cols, grams, gys = [], [], []
+        for f in fams:
+            c = family_columns(f, data)
+            grams.append(np.einsum("knm,knp->kmp", c, c))
+            gys.append(np.einsum("knm,n->km", c, data.y))
+            cols.append(c.astype(np.float32))
+        return cls(fams, tuple(cols), tuple(grams), tuple(gys))
+
+
+def _family_err(cands: Candidates, i: int, q: FloatArray, qy: FloatArray,
+                yy: float) -> FloatArray:
+    """ERR of every member of family ``i`` after the span of ``q`` (Gram updates only)."""
+    gram, rhs = cands.grams[i], cands.gys[i]
+    if q.shape[1]:
+        qg = np.einsum("nr,knm->krm", q.astype(np.float32), cands.cols[i]).astype(np.float64)
+        gram = gram - np.einsum("krm,krp->kmp", qg, qg)
+        rhs = rhs - np.einsum("krm,r->km", qg, qy)
+    m = gram.shape[1]
+    scale = np.trace(gram, axis1=1, axis2=2)[:, None, None]
+    sol = np.linalg.solve(gram + (1e-10 * scale + 1e-300) * np.eye(m), rhs[..., None])[..., 0]
+    err: FloatArray = np.einsum("km,km->k", sol, rhs) / yy
+    return err
+
+
+def share_of(y: FloatArray, base: FloatArray, extra: FloatArray) -> float:
+    """Unwhitened ERR of ``extra`` after ``base``: its share of the mismatch energy."""
+    _, r0 = lstsq(base, y)
+    _, r1 = lstsq(np.hstack([base, extra]), y)
+    return float(r0 @ r0 - r1 @ r1) / float(y @ y)
+
+
+def score_step(data: EquationData, cands: Candidates, chosen: list[Effect], alpha: float,
+               min_share: float) -> list[Step]:
+    """Score every remaining family once; return its best member's step, best ERR first."""
+    y = data.y
+    base = _stack(chosen, data)
+    q = np.linalg.qr(base)[0] if base.shape[1] else np.zeros((len(y), 0))
+    names = {e.name for e in chosen}
+    n_tests = sum(f.n_independent for f in cands.families if f.name not in names)
+    out = []
+    qy = q.T @ y
+    yy = float(y @ y)
+    for i, fam in enumerate(cands.families):
+        if fam.name in names:
+            continue
+        errs = _family_err(cands, i, q, qy, yy)
+        k = int(np.argmax(errs))
+        err = float(errs[k])
+        effect = fam.members[k]
+        extra = columns(effect, data)
+        test = nested_f_test(y, base, extra)
+        share = share_of(y, base, extra)
+        ok = test.corrected_log10_p(n_tests) < math.log10(alpha) and share >= min_share
+        out.append(Step(effect, err, share, test, n_tests, ok))
+    return sorted(out, key=lambda s: -s.err)
+
+
+def forward_select(data: EquationData, cands: Candidates, alpha: float = ALPHA,
+                   min_share: float = MIN_SHARE, max_effects: int = MAX_EFFECTS,
+                   ) -> tuple[list[Step], list[Step]]:
+    """Accepted steps in order, and the scores of the refused candidates at the last step."""
+    chosen: list[Effect] = []
+    steps: list[Step] = []
+    while len(chosen) < min(max_effects, len(cands.families)):
+        scored = score_step(data, cands, chosen, alpha, min_share)
+        passing = [s for s in scored if s.accepted]
+        if not passing:
+            return steps, scored
+        steps.append(passing[0])
+        chosen.append(passing[0].effect)
+    return steps, []
+
+
+def _stack(effects: list[Effect], data: EquationData) -> FloatArray:
+    if not effects:
+        return np.zeros((data.n, 0))
+    return np.hstack([columns(e, data) for e in effects])
