@@ -101,6 +101,7 @@ def _peak_row(p: Peak, ex: ExcitationSummary | None) -> dict[str, Any]:
 def _ridge_row(r: Ridge, ex: ExcitationSummary | None) -> dict[str, Any]:
     row = asdict(r)
     row.pop("order")
+    row["gain_db"] = r.level_db  # a ridge's gain: median 20 log10 |H_n| along its line
     return _judged(row, r.freq_hz, ex)
 
 
