@@ -90,8 +90,8 @@ def test_recorder_readable_while_open(tmp_path: Path) -> None:
 
 
 CHILD = r"""
-import sys, time
-from pmsm_sysid.bagio import BagRecorder, typestore
+import contextlib, sys, time
+from pmsm_sysid.bagio import BagRecorder, sigterm_as_exit, typestore
 store = typestore()
 T = store.types
 def msg(k):
@@ -100,7 +100,8 @@ def msg(k):
                                         frame_id="f"),
         point=T["geometry_msgs/msg/Point"](x=float(k), y=0.0, z=0.0))
     return store.serialize_cdr(m, "geometry_msgs/msg/PointStamped")
-with BagRecorder(sys.argv[1], storage=sys.argv[2], flush_interval_s=0.1) as rec:
+graceful = sigterm_as_exit() if sys.argv[3] == "1" else contextlib.nullcontext()
+with graceful, BagRecorder(sys.argv[1], storage=sys.argv[2], flush_interval_s=0.1) as rec:
     rec.add_topic("/p", "geometry_msgs/msg/PointStamped")
     k, shown = 0, 0
     try:
@@ -116,9 +117,10 @@ with BagRecorder(sys.argv[1], storage=sys.argv[2], flush_interval_s=0.1) as rec:
 """
 
 
-def _record_then_signal(bag: Path, storage: str, sig: int) -> tuple[int, int | None]:
+def _record_then_signal(bag: Path, storage: str, sig: int,
+                        graceful: bool = False) -> tuple[int, int | None]:
     """Run a recording child, signal it after a few flushes; (last flushed, written if told)."""
-    proc = subprocess.Popen([sys.executable, "-c", CHILD, str(bag), storage],
+    proc = subprocess.Popen([sys.executable, "-c", CHILD, str(bag), storage, str(int(graceful))],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None
     flushed, flushes = 0, 0
@@ -151,13 +153,19 @@ def test_hard_kill_loses_at_most_one_flush_interval(tmp_path: Path, sig: int) ->
     assert len(_bag_messages(bag)) >= len(got)
 
 
-def test_sigint_finalises_everything(tmp_path: Path) -> None:
-    bag = tmp_path / "interrupted"
-    _, written = _record_then_signal(bag, "sqlite3", signal.SIGINT)
+@pytest.mark.parametrize("sig,graceful,storage", [(signal.SIGINT, False, "sqlite3"),
+                                                   (signal.SIGTERM, True, "sqlite3"),
+                                                   (signal.SIGTERM, True, "mcap")])
+def test_interrupt_finalises_everything(tmp_path: Path, sig: int, graceful: bool,
+                                        storage: str) -> None:
+    """SIGINT, or SIGTERM under sigterm_as_exit(): every message written is in the bag."""
+    bag = tmp_path / "stopped"
+    _, written = _record_then_signal(bag, storage, sig, graceful)
     assert written is not None
     got = _bag_messages(bag)
     assert got == [(k, float(k)) for k in range(written)]
-    assert sorted(p.name for p in bag.iterdir()) == ["interrupted.db3", "metadata.yaml"]
+    ext = "db3" if storage == "sqlite3" else "mcap"
+    assert sorted(p.name for p in bag.iterdir()) == sorted(["metadata.yaml", f"stopped.{ext}"])
 
 
 def test_killed_mcap_is_refused_then_salvaged(tmp_path: Path) -> None:

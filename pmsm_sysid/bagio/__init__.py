@@ -26,13 +26,13 @@ from .common import (
     typestore,
 )
 from .read import bag_topics, iter_raw, read_recording
-from .recorder import BagRecorder, repair
+from .recorder import BagRecorder, repair, sigterm_as_exit
 from .schemas import encode_model_msg, encode_ridges_msg, encode_validation_msg
 from .write import write_recording
 
 __all__ = [
     "DEFAULT_QOS", "FRAME_ID", "BagRecorder", "LoadedRecording", "RawMessage", "bag_topics",
     "connection_args", "encode_model_msg", "encode_ridges_msg", "encode_validation_msg",
-    "iter_raw", "open_reader", "read_recording", "repair", "schema_dir", "storage_plugin",
-    "typestore", "write_recording",
+    "iter_raw", "open_reader", "read_recording", "repair", "schema_dir", "sigterm_as_exit",
+    "storage_plugin", "typestore", "write_recording",
 ]

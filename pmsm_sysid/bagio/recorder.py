@@ -11,21 +11,26 @@ Crash behaviour of ``rosbags`` as shipped (0.11.9), which this module works arou
 :class:`BagRecorder` therefore defaults to **sqlite3** in WAL mode and, every
 ``flush_interval_s`` (checked on each write, or on :meth:`flush`), commits, checkpoints the
 WAL into the ``.db3`` and rewrites ``metadata.yaml`` atomically to match what is committed.
-Guarantee: a hard kill (SIGKILL, power loss of the process) loses at most the messages
+Guarantee: a hard kill (SIGKILL, a crash of the process) loses at most the messages
 written since the last flush; the bag stays readable as-is by ``rosbags``/``ros2 bag``, and
 :func:`repair` rebuilds ``metadata.yaml`` from the database in the rare case the kill hit a
-flush. SIGINT/SIGTERM turned into an exception or normal exit (rclpy does this) finalise the
-bag through ``close()`` (context manager, ``atexit``). With ``storage="mcap"`` the pending
-chunk is written to disk at each flush too, but a killed ``.mcap`` lacks its footer: readers
-refuse it until :func:`repair` rewrites it from its complete chunks (same loss bound).
+flush. SIGINT/SIGTERM turned into an exception or normal exit (rclpy does this; otherwise
+:func:`sigterm_as_exit`) finalise the bag through ``close()`` (context manager, ``atexit``).
+With ``storage="mcap"`` the pending chunk is written to disk at each flush too, but a killed
+``.mcap`` lacks its footer: readers refuse it until :func:`repair` rewrites it from its
+complete chunks (same loss bound).
 """
 
 from __future__ import annotations
 
 import atexit
+import signal
 import sqlite3
+import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -186,6 +191,21 @@ class BagRecorder:
              c.digest, w.counts[c.id]) for c in w.connections]
         return metadata_dict(self.storage, w.storage.path.name, rows,  # type: ignore[union-attr]
                              w.min_timestamp, w.max_timestamp)
+
+
+@contextmanager
+def sigterm_as_exit() -> Iterator[None]:
+    """Within the block SIGTERM raises ``SystemExit(143)`` (as SIGINT raises
+    ``KeyboardInterrupt``), so ``with BagRecorder(...)`` blocks unwind and finalise the bag.
+    For programs that do not let rclpy handle SIGTERM; main thread only."""
+    def _exit(signum: int, frame: object) -> None:
+        sys.exit(128 + signum)
+
+    previous = signal.signal(signal.SIGTERM, _exit)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _old_custom(bag: Path) -> dict[str, str] | None:
