@@ -29,7 +29,7 @@ import itertools
 import math
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -87,7 +87,6 @@ class Gfrf:
     b: FloatArray                  # linear input part: b[m] is the coefficient of u(k-m)
     nonlinear: tuple[_NlTerm, ...]
     sample_rate_hz: float = 1.0
-    degree: int = field(default=1)
 
     @classmethod
     def from_model(cls, model: NarxModel) -> Gfrf:
@@ -109,9 +108,7 @@ class Gfrf:
                 b[ulags[0]] += float(c)
             else:
                 nl.append(_NlTerm(float(c), ylags, ulags))
-        degree = max((t.degree for t in model.terms), default=1)
-        return cls(a=a, b=b, nonlinear=tuple(nl), sample_rate_hz=float(model.sample_rate_hz),
-                   degree=max(degree, 1))
+        return cls(a=a, b=b, nonlinear=tuple(nl), sample_rate_hz=float(model.sample_rate_hz))
 
     @property
     def is_linear(self) -> bool:

@@ -20,7 +20,7 @@ from .errors import GfrfError
 from .gfrf import MAX_GRID, Gfrf
 from .identifiability import ExcitationSummary, identifiability_block, judge
 from .model import NarxModel
-from .ridges import Peak, Ridge, h1_peaks, h2_ridges, h3_ridges
+from .ridges import Peak, Ridge, h1_peaks, h2_ridges, h3_ridges, is_zero
 
 MAX_AT_POINTS = 10_000
 MAX_REPORT_GRID = 512  # --grid N puts N x N dB values in the JSON: keep files reasonable
@@ -146,7 +146,7 @@ def nonlinear_err(model: NarxModel) -> float | None:
 def _higher(g: Gfrf, order: int, ridges: list[Ridge], ex: ExcitationSummary | None,
             zero_note: str, nl_err: float | None) -> dict[str, Any]:
     rows = [_ridge_row(r, ex) for r in ridges]
-    zero = not ridges and _is_zero(g, order)
+    zero = not ridges and is_zero(g, order)
     out: dict[str, Any] = {"zero": zero, "ridges": rows}
     if order == 3:
         out["slice"] = "f1 = f3"
@@ -159,11 +159,6 @@ def _higher(g: Gfrf, order: int, ridges: list[Ridge], ex: ExcitationSummary | No
                        "the plant's or fitted noise needs checking on independent data")
     out["weak"] = bool(zero or (nl_err is not None and nl_err < WEAK_ERR))
     return out
-
-
-def _is_zero(g: Gfrf, order: int) -> bool:
-    pts = np.random.default_rng(0).uniform(-0.5, 0.5, (order, 64))
-    return float(np.max(np.abs(g.h(*pts)))) == 0.0
 
 
 def _warnings(g: Gfrf, stable: bool, model: NarxModel, ex: ExcitationSummary | None) -> list[str]:

@@ -174,7 +174,8 @@ H3_LINES: dict[str, LineFn] = {
 }
 
 
-def _is_zero(g: Gfrf, order: int) -> bool:
+def is_zero(g: Gfrf, order: int) -> bool:
+    """True when H_n vanishes (checked at 64 random points: H_n is analytic in them)."""
     rng = np.random.default_rng(0)
     pts = rng.uniform(-0.5, 0.5, (order, 64))
     return float(np.max(np.abs(g.h(*pts)))) == 0.0
@@ -183,7 +184,7 @@ def _is_zero(g: Gfrf, order: int) -> bool:
 def h2_ridges(g: Gfrf, n_c: int = 251, n_along: int = 128,
               min_prominence_db: float = 6.0) -> list[Ridge]:
     """Ridges of |H2_sym| (module docstring); [] when H2 is identically zero."""
-    if _is_zero(g, 2):
+    if is_zero(g, 2):
         return []
     f1 = _family_ridges(g, 2, "f1", H2_LINES["f1"], n_c, n_along, min_prominence_db)
     f2 = [replace(r, kind="f2") for r in f1]
@@ -194,7 +195,7 @@ def h2_ridges(g: Gfrf, n_c: int = 251, n_along: int = 128,
 def h3_ridges(g: Gfrf, n_c: int = 251, n_along: int = 96, min_prominence_db: float = 6.0,
               h1_peak_norm: tuple[float, ...] = ()) -> list[Ridge]:
     """Ridges of |H3_sym| on the slice f1 = f3 (module docstring); [] when H3 is zero."""
-    if _is_zero(g, 3):
+    if is_zero(g, 3):
         return []
     out: list[Ridge] = []
     tol = 2.0 / (n_c - 1)
