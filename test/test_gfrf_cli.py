@@ -165,3 +165,21 @@ def test_console_script_end_to_end(tmp_path: Path) -> None:
     d = json.loads(out.stdout)
     assert d["h1"]["peaks"][0]["gain_db"] == pytest.approx(46.4, abs=0.05)
     assert "H1 peaks" in out.stderr  # the human summary goes to stderr with --json -
+
+
+def test_pole_on_the_unit_circle(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An integrator (position from thrust through y(k-1) = 1): H1(0) is infinite. The tool
+    reports it (stable false, null values in JSON, n/a in the text) instead of failing."""
+    model = {"sample_rate_hz": 500.0,
+             "terms": [{"name": "y(k-1)", "estimate": 1.0}, {"name": "u(k-1)", "estimate": 0.002},
+                       {"name": "y(k-1)u(k-1)", "estimate": 0.01}]}
+    rc, d = run_cli(tmp_path, model, "--at", "0", "--at", "0.1")
+    assert rc == 0 and d is not None
+    assert d["stable"] is False and d["max_pole_radius"] == pytest.approx(1.0)
+    assert d["eval"][0]["h"] == [None, None] and d["eval"][0]["gain_db"] is None
+    z = np.exp(-2j * np.pi * 0.1)
+    h = 0.002 * z / (1 - z)
+    assert d["eval"][1]["h"] == pytest.approx([h.real, h.imag], abs=1e-15)
+    assert d["h1"]["peaks"][0]["kind"] == "dc" and d["h1"]["peaks"][0]["gain_db"] is None
+    captured = capsys.readouterr()
+    assert "n/a" in captured.out and "Warning" not in captured.err

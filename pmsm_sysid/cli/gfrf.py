@@ -91,6 +91,11 @@ def _load(path: str) -> Any:
     return d
 
 
+def _num(x: float | None, width: int, fmt: str = ".2f") -> str:
+    """A JSON number for printing; null (non-finite: at a pole on the unit circle) -> n/a."""
+    return f"{'n/a':>{width}}" if x is None else f"{x:{width}{fmt}}"
+
+
 def _print(res: dict[str, Any], out: TextIO) -> None:
     fs = res["sample_rate_hz"]
     radius = res["max_pole_radius"]
@@ -106,7 +111,8 @@ def _print(res: dict[str, Any], out: TextIO) -> None:
     print("H1 peaks:" if res["h1"]["peaks"] else "H1 peaks: none", file=out)
     for p in res["h1"]["peaks"]:
         print(f"  {p['kind']:<9} {p['freq_norm']:.4f} cyc/sample = {p['freq_hz']:7.2f} Hz  "
-              f"{p['gain_db']:7.2f} dB  {p['phase_deg']:8.2f} deg  [{mark(p)}]", file=out)
+              f"{_num(p['gain_db'], 7)} dB  {_num(p['phase_deg'], 8)} deg  [{mark(p)}]",
+              file=out)
     for order in ("h2", "h3"):
         block = res[order]
         ridges = [r for r in block["ridges"] if r["sign"] > 0]
@@ -120,14 +126,14 @@ def _print(res: dict[str, Any], out: TextIO) -> None:
         print(f"{label}:" if ridges else f"{label}: none", file=out)
         for r in ridges:
             print(f"  {r['kind']:<9} = +-{r['freq_norm']:.4f} cyc/sample = +-{r['freq_hz']:7.2f} Hz"
-                  f"  level {r['level_db']:7.2f} dB  [{mark(r)}]", file=out)
+                  f"  level {_num(r['level_db'], 7)} dB  [{mark(r)}]", file=out)
         if block.get("note"):
             print(f"  note: {block['note']}", file=out)
     for e in res["eval"]:
         args = ", ".join(f"{f:g}" for f in e["f"])
-        gain = "-inf" if e["gain_db"] is None else f"{e['gain_db']:.3f}"
-        print(f"H{e['order']}({args}) = {e['h'][0]:.6g} {e['h'][1]:+.6g}j  "
-              f"({gain} dB, {e['phase_deg']:.2f} deg)", file=out)
+        re, im = (_num(x, 0, ".6g") for x in e["h"])
+        print(f"H{e['order']}({args}) = {re} {im}j  ({_num(e['gain_db'], 0, '.3f')} dB, "
+              f"{_num(e['phase_deg'], 0)} deg)", file=out)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -145,6 +145,11 @@ class Gfrf:
         # Arguments passed as the same array object share one label, so their permutations
         # are evaluated once (e.g. H3(f, t, f) needs 3 of the 6 orderings of Eq. 9).
         labels = tuple(next(j for j in range(i + 1) if f[j] is f[i]) for i in range(len(f)))
+        # A pole on the unit circle gives inf (nan where inf meets 0) at its frequency.
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            return self._sym(f, labels, symmetric)
+
+    def _sym(self, f: list[FloatArray], labels: tuple[int, ...], symmetric: bool) -> ComplexArray:
         ev = _Evaluator(self, f)
         shape = np.broadcast_shapes(*(x.shape for x in f))
         if not symmetric or len(f) == 1:

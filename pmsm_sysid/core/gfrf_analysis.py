@@ -111,10 +111,11 @@ def _evals(g: Gfrf, at: Sequence[Sequence[float]]) -> tuple[dict[str, Any], ...]
     rows = []
     for pt in at:
         h = complex(g.h(*[float(x) for x in pt]))
+        finite = bool(np.isfinite(h))
         rows.append({
             "f": [float(x) for x in pt], "order": len(pt), "h": [h.real, h.imag],
-            "gain_db": float(20 * np.log10(abs(h))) if h != 0 else None,
-            "phase_deg": float(np.degrees(np.angle(h))),
+            "gain_db": float(20 * np.log10(abs(h))) if finite and h != 0 else None,
+            "phase_deg": float(np.degrees(np.angle(h))) if finite else None,
         })
     return tuple(rows)
 

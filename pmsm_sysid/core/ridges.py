@@ -35,6 +35,7 @@ FloatArray = NDArray[np.float64]
 LineFn = Callable[[FloatArray, FloatArray], tuple[FloatArray, ...]]
 TINY = 1e-300
 DOMINANT_DB = 20.0
+DB_CAP = 600.0  # |H| beyond 1e30 (a pole on the unit circle) scores as 600 dB
 
 
 @dataclass(frozen=True)
@@ -84,7 +85,11 @@ def poles(g: Gfrf) -> list[Pole]:
 
 
 def _db(h: NDArray[np.complex128]) -> FloatArray:
-    return np.asarray(20.0 * np.log10(np.maximum(np.abs(h), TINY)), dtype=np.float64)
+    """20 log10 |h|, capped at +-DB_CAP (a pole on the unit circle makes |h| infinite)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        db = 20.0 * np.log10(np.maximum(np.abs(h), TINY))
+    return np.nan_to_num(np.asarray(db, dtype=np.float64), nan=-DB_CAP, posinf=DB_CAP,
+                         neginf=-DB_CAP).clip(-DB_CAP, DB_CAP)
 
 
 def _mirror_peaks(y: FloatArray, min_prom: float) -> list[tuple[int, float]]:
@@ -119,13 +124,16 @@ def h1_peaks(g: Gfrf, n: int = 8193, min_prominence_db: float = 3.0) -> list[Pea
     for j, prom in _mirror_peaks(db, min_prominence_db):
         fine = np.clip(np.linspace(f[j] - step, f[j] + step, 101), 0.0, 0.5)
         hf = g.h1(fine)
-        k = int(np.argmax(np.abs(hf)))
+        k = int(np.argmax(_db(hf)))
         f0, h0 = float(fine[k]), complex(hf[k])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            gain = float(20 * np.log10(abs(h0))) if np.isfinite(h0) else float("inf")
         kind = "dc" if j == 0 else "nyquist" if j == n - 1 else "resonance"
         near = _nearest_pole(pls, f0)
         out.append(Peak(
             kind=kind, freq_norm=f0, freq_hz=f0 * g.sample_rate_hz,
-            gain_db=float(20 * np.log10(abs(h0))), phase_deg=float(np.degrees(np.angle(h0))),
+            gain_db=gain, phase_deg=float(np.degrees(np.angle(h0))) if np.isfinite(h0) else
+            float("nan"),
             prominence_db=prom, pole_radius=near,
         ))
     return sorted(out, key=lambda p: -p.gain_db)

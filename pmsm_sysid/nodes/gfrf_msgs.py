@@ -30,6 +30,10 @@ CORRELATION_TESTS = ("ee", "ue", "u2e", "u2e2", "e_eu")
 OK, WARN, ERROR = 0, 1, 2
 
 
+def _num(value: Any) -> float:
+    return math.nan if value is None else float(value)
+
+
 def _supported(value: Any) -> float:
     return -1.0 if value is None else 1.0 if value else 0.0
 
@@ -39,11 +43,11 @@ def ridge_rows(gfrf: dict[str, Any]) -> list[list[float]]:
     rows = []
     for p in gfrf["h1"]["peaks"]:
         rows.append([1.0, float(KIND_CODES.index(p["kind"])), 1.0, p["freq_hz"], p["freq_norm"],
-                     p["gain_db"], _supported(p.get("supported"))])
+                     _num(p["gain_db"]), _supported(p.get("supported"))])
     for order in (2, 3):
         for r in gfrf[f"h{order}"]["ridges"]:
             rows.append([float(order), float(KIND_CODES.index(r["kind"])), float(r["sign"]),
-                         r["freq_hz"], r["freq_norm"], r["level_db"],
+                         r["freq_hz"], r["freq_norm"], _num(r["level_db"]),
                          _supported(r.get("supported"))])
     return [[float(x) for x in row] for row in rows]
 
