@@ -171,7 +171,7 @@ class MotorSimNode(Node):
             self._wire(plant, excitation, seed, amplitude_n, namespace, clock, rate, burst,
                        max_samples, frame_id, excitation_options)
         except BaseException:
-            self.destroy_node()
+            self.destroy_node()  # type: ignore[no-untyped-call]
             raise
 
     def _wire(self, plant: Plant | None, excitation: str, seed: int, amplitude_n: float | None,

@@ -1,0 +1,121 @@
+"""RecorderNode: subscribes with ``raw=True`` and stores the CDR bytes through a BagRecorder.
+
+- Topics: by default the contract inputs under the namespace plus the identification outputs
+  (``/pmsm_sysid/*``); with ``topics`` exactly those. Topics of known type are subscribed at
+  once (nothing published after the recorder starts is missed); others when they show up in
+  the ROS graph, with the type and reliability their publishers offer.
+- QoS: reliable, keep-last ``depth`` (default 10000 per topic, 20 s at 500 Hz) so bursts from a
+  fast replay or a busy executor are absorbed rather than overwritten.
+- Bag timestamp = the middleware's receive time of the message (``received_timestamp``).
+  A topic enters the bag with its first message, so the bag lists only topics that carried
+  data. The bag is flushed (readable, crash-safe) once per second.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from rclpy.context import Context
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from ..bagio import BagRecorder
+from ..rosutil import data_qos, message_class
+from ..topics import (
+    CHANGE_TOPIC,
+    DEFAULT_NAMESPACE,
+    INPUT_TYPES,
+    MODEL_TOPIC,
+    RIDGES_ARRAY_TOPIC,
+    RIDGES_TOPIC,
+    VALIDATION_TOPIC,
+    input_topic,
+)
+
+OUTPUT_TYPES = {
+    MODEL_TOPIC: "std_msgs/msg/String",
+    RIDGES_TOPIC: "std_msgs/msg/String",
+    RIDGES_ARRAY_TOPIC: "std_msgs/msg/Float64MultiArray",
+    VALIDATION_TOPIC: "diagnostic_msgs/msg/DiagnosticArray",
+    CHANGE_TOPIC: "diagnostic_msgs/msg/DiagnosticArray",
+}
+
+
+def known_type(topic: str) -> str | None:
+    """The contract type of ``topic`` when its name fixes it (inputs, outputs), else None."""
+    if topic in OUTPUT_TYPES:
+        return OUTPUT_TYPES[topic]
+    return INPUT_TYPES.get(topic.rsplit("/", 1)[-1])
+
+
+def default_topics(namespace: str) -> dict[str, str]:
+    """topic -> type recorded by default: the three inputs and the identification outputs."""
+    return {**{input_topic(namespace, s): t for s, t in INPUT_TYPES.items()}, **OUTPUT_TYPES}
+
+
+class RecorderNode(Node):
+    """Writes every message on the chosen topics into ``recorder`` (see module docstring)."""
+
+    def __init__(self, recorder: BagRecorder, *, context: Context | None = None,
+                 namespace: str = DEFAULT_NAMESPACE, topics: Sequence[str] | None = None,
+                 depth: int = 10000, flush_period_s: float = 1.0,
+                 node_name: str = "pmsm_record") -> None:
+        super().__init__(node_name, context=context)
+        self.recorder = recorder
+        self.depth = depth
+        self.counts: Counter[str] = Counter()
+        self.first_receive_ns: int | None = None
+        wanted = default_topics(namespace) if topics is None else {
+            self.resolve_topic_name(t): known_type(self.resolve_topic_name(t)) for t in topics}
+        self.pending = {t for t, ty in wanted.items() if ty is None}
+        self.types: dict[str, str] = {}
+        for topic, msgtype in wanted.items():
+            if msgtype is not None:
+                self._subscribe(topic, msgtype, reliable=True)
+        self.create_timer(flush_period_s, recorder.flush)
+        if self.pending:
+            self.create_timer(0.25, self._discover)
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+    def _subscribe(self, topic: str, msgtype: str, reliable: bool) -> None:
+        qos = data_qos(self.depth)
+        if not reliable:
+            qos = QoSProfile(depth=self.depth,  # type: ignore[no-untyped-call]
+                             reliability=ReliabilityPolicy.BEST_EFFORT)
+        self.types[topic] = msgtype
+        callback: Any = self._writer(topic, msgtype)  # rclpy passes MessageInfo to 2-arg ones
+        self.create_subscription(message_class(msgtype), topic, callback, qos, raw=True)
+
+    def _writer(self, topic: str, msgtype: str) -> Callable[[bytes, Any], None]:
+        recorder, counts = self.recorder, self.counts
+
+        def callback(data: bytes, info: Any) -> None:
+            stamp = int(info.get("received_timestamp") or 0) or time.time_ns()
+            if not counts[topic]:
+                recorder.add_topic(topic, msgtype)
+                if self.first_receive_ns is None:
+                    self.first_receive_ns = stamp
+            recorder.write(topic, stamp, data)
+            counts[topic] += 1
+
+        return callback
+
+    def _discover(self) -> None:
+        """Subscribe to pending topics once a publisher shows their type."""
+        found = dict(self.get_topic_names_and_types())
+        for topic in sorted(self.pending):
+            msgtypes = found.get(topic, [])
+            if not msgtypes:
+                continue
+            infos = self.get_publishers_info_by_topic(topic)
+            reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+            self._subscribe(topic, msgtypes[0], reliable)
+            self.pending.discard(topic)
+            self.get_logger().info(  # type: ignore[no-untyped-call]
+                f"recording {topic} ({msgtypes[0]})")

@@ -1,0 +1,192 @@
+"""simulate -> bag -> replay -> record -> bag keeps every message bit for bit; loop; SIGTERM."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from pmsm_sysid.core.excitation import ExcitationSource
+from pmsm_sysid.core.physics import simulate
+from pmsm_sysid.core.plant import load_plant
+
+REPO = Path(__file__).resolve().parents[1]
+CLI = [sys.executable, "-m", "pmsm_sysid.cli"]
+NS = 1_000_000_000
+
+
+def _make_bag(path: Path, n: int, seed: int = 5, storage: str = "mcap") -> Any:
+    from pmsm_sysid.bagio import write_recording
+
+    plant = load_plant(REPO / "plants" / "nominal_noisy.yaml")
+    rec = simulate(plant, ExcitationSource("multisine", 500.0, seed=seed).block(0, n), seed=seed)
+    write_recording(path, rec, storage=storage)
+    return rec
+
+
+def _raw(path: Path) -> dict[str, list[bytes]]:
+    """topic -> CDR bytes in log order, read with plain rosbags (no project code)."""
+    from rosbags.highlevel import AnyReader
+
+    out: dict[str, list[bytes]] = {}
+    with AnyReader([path]) as reader:
+        for conn, _, data in reader.messages():
+            out.setdefault(conn.topic, []).append(bytes(data))
+    return out
+
+
+def _stamps_values(path: Path, topic: str) -> tuple[list[int], list[Any]]:
+    from rosbags.highlevel import AnyReader
+
+    stamps, msgs = [], []
+    with AnyReader([path]) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        for conn, _, data in reader.messages(connections=conns):
+            msg = reader.deserialize(data, conn.msgtype)
+            stamps.append(msg.header.stamp.sec * NS + msg.header.stamp.nanosec)
+            msgs.append(msg)
+    return stamps, msgs
+
+
+def _run_in_process(ctx: Any, bag: Path, out: Path, expected: int, **replay: Any) -> Any:
+    """Replayer and recorder as nodes on one SingleThreadedExecutor."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    from pmsm_sysid.bagio import BagRecorder
+    from pmsm_sysid.nodes.recorder import RecorderNode
+    from pmsm_sysid.nodes.replayer import ReplayerNode
+
+    ex = SingleThreadedExecutor(context=ctx)
+    with BagRecorder(out) as recorder:
+        rec_node = RecorderNode(recorder, context=ctx, namespace=replay.pop("record_ns", "/pmsm"))
+        rep_node = ReplayerNode(bag, context=ctx, settle_s=0.0, linger_s=0.1, **replay)
+        ex.add_node(rec_node)
+        ex.add_node(rep_node)
+        try:
+            deadline = time.monotonic() + 60
+            while not (rep_node.finished and rec_node.total >= expected):
+                assert time.monotonic() < deadline, f"recorded {rec_node.total} of {expected}"
+                ex.spin_once(timeout_sec=0.05)
+        finally:
+            ex.shutdown()
+            rep_node.destroy_node()
+            rec_node.destroy_node()
+    return rep_node
+
+
+@pytest.mark.ros
+def test_round_trip_in_process_is_bit_for_bit(ros_context: Any, tmp_path: Path) -> None:
+    from pmsm_sysid.bagio import read_recording
+
+    n = 1500
+    rec = _make_bag(tmp_path / "sim", n)
+    rep = _run_in_process(ros_context, tmp_path / "sim", tmp_path / "rec", 3 * n, rate=0.0)
+    assert rep.stats.matched and rep.stats.passes == 1
+    original, recorded = _raw(tmp_path / "sim"), _raw(tmp_path / "rec")
+    assert sorted(recorded) == ["/pmsm/position", "/pmsm/speed", "/pmsm/thrust"]
+    for topic, msgs in original.items():
+        assert len(recorded[topic]) == n == len(msgs)
+        assert recorded[topic] == msgs, topic          # every CDR byte, in order
+    back = read_recording(tmp_path / "rec").recording
+    assert np.array_equal(back.t, rec.t) and np.array_equal(back.speed, rec.speed)
+    assert np.array_equal(back.thrust, rec.thrust)
+    assert np.array_equal(back.position, rec.position)
+
+
+@pytest.mark.ros
+def test_loop_shifts_stamps_and_paced_replay_keeps_schedule(ros_context: Any,
+                                                            tmp_path: Path) -> None:
+    """Two passes at 4x under a new namespace: stamps keep increasing by exactly one period."""
+    n, rate = 200, 4.0
+    _make_bag(tmp_path / "sim", n, storage="sqlite3")
+    start = time.monotonic()
+    rep = _run_in_process(ros_context, tmp_path / "sim", tmp_path / "rec", 2 * 3 * n,
+                          rate=rate, loops=2, namespace="/axis2", record_ns="/axis2")
+    elapsed = time.monotonic() - start
+    assert rep.stats.passes == 2
+    # paced: the second pass cannot start before (2n - 1) periods / rate of playback
+    assert elapsed >= (2 * n - 1) * 0.002 / rate
+    assert rep.offset_ns == n * 2_000_000   # span (n-1) periods + one period
+    orig_stamps, orig = _stamps_values(tmp_path / "sim", "/pmsm/speed")
+    stamps, msgs = _stamps_values(tmp_path / "rec", "/axis2/speed")
+    assert len(stamps) == 2 * n
+    assert np.all(np.diff(stamps) == 2_000_000)      # strictly increasing, no seam
+    assert stamps[:n] == orig_stamps
+    assert [m.twist.linear.x for m in msgs] == [m.twist.linear.x for m in orig] * 2
+    assert {m.header.frame_id for m in msgs} == {"pmsm"}
+
+
+def test_header_stamp_patch_equals_reserialisation() -> None:
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.serialization import serialize_message
+
+    from pmsm_sysid.nodes.replayer import header_stamp_ns, with_header_stamp
+
+    msg = WrenchStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 12, 345
+    msg.header.frame_id = "pmsm"
+    msg.wrench.force.x = -1.25
+    data = serialize_message(msg)
+    assert header_stamp_ns(data) == 12 * NS + 345
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 7, 999_999_999
+    assert with_header_stamp(data, 7 * NS + 999_999_999) == serialize_message(msg)
+
+
+def _env(domain: int, tmp: Path) -> dict[str, str]:
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               ROS_LOG_DIR=str(tmp / "ros_log"), PYTHONUNBUFFERED="1")
+    return env
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_cli_replay_to_record_and_sigterm_finalises(ros_env: int, tmp_path: Path) -> None:
+    """Two processes: `record` (stopped by SIGTERM) and `replay --fast` of a simulated bag."""
+    n = 2000
+    _make_bag(tmp_path / "sim", n)
+    env = _env(ros_env, tmp_path)
+    recorder = subprocess.Popen([*CLI, "record", "--out", str(tmp_path / "rec")], env=env,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert recorder.stdout is not None
+        first = recorder.stdout.readline()      # printed once the subscriptions exist
+        assert first.startswith("recording /pmsm/position"), first
+        replay = subprocess.run([*CLI, "replay", str(tmp_path / "sim"), "--fast", "--json", "-"],
+                                env=env, capture_output=True, text=True, timeout=120)
+        assert replay.returncode == 0, replay.stderr
+        sent = json.loads(replay.stdout)
+        assert sent["matched"] and sent["messages"] == 3 * n
+        recorder.send_signal(signal.SIGTERM)
+        out, err = recorder.communicate(timeout=30)
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+    assert recorder.returncode == 0, err
+    assert f"recorded {tmp_path / 'rec'}: {3 * n} messages" in out
+    original, recorded = _raw(tmp_path / "sim"), _raw(tmp_path / "rec")   # plain AnyReader
+    assert {t: len(m) for t, m in recorded.items()} == {t: n for t in original}
+    assert recorded == original
+
+
+def test_cli_errors_are_one_line(ros_env: int, tmp_path: Path) -> None:
+    env = _env(ros_env, tmp_path)
+    cases = [
+        ([*CLI, "replay", str(tmp_path / "missing")], "no such bag"),
+        ([*CLI, "replay", str(REPO / "README.md")], "not a rosbag2"),
+        ([*CLI, "replay", str(tmp_path), "--rate", "-1"], "--rate must be >= 0"),
+        ([*CLI, "record", "--out", str(REPO / "README.md")], "exists already"),
+        ([*CLI, "record", "--out", str(tmp_path / "x"), "--duration", "0"], "--duration"),
+    ]
+    for argv, text in cases:
+        proc = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 2, (argv, proc.stderr)
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and text in lines[0], (argv, proc.stderr)
