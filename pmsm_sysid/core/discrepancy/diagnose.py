@@ -97,10 +97,10 @@ def _drop_one(fit: Fit, data: EquationData, n_tests: float) -> list[float]:
     from scipy import stats
 
     X, fixed = design(fit.effects, data)
-    r = data.y - fixed - X @ fit.beta
-    poly = ar_whitener(r)
-    sse1 = float(np.sum(whiten(poly, r) ** 2))
-    dof = max(1, len(r) - X.shape[1] - len(fit.eta))
+    poly = ar_whitener(data.y - fixed - X @ fit.beta)
+    _, r1 = lstsq(whiten(poly, X), whiten(poly, data.y - fixed))  # GLS, like the reduced fits
+    sse1 = float(r1 @ r1)
+    dof = max(1, len(r1) - X.shape[1] - len(fit.eta))
     out = []
     for k in range(len(fit.effects)):
         rest = fit.effects[:k] + fit.effects[k + 1:]
@@ -158,10 +158,9 @@ def _named(fit: Fit, data: EquationData, plant: Plant, held: list[Any],
     return out
 
 
-def _correct(plant: Plant, found: list[FoundEffect]) -> tuple[Plant, list[str]]:
+def _correct(plant: Plant, named: list[tuple[str, dict[str, Any]]]) -> tuple[Plant, list[str]]:
     try:
-        return corrected_plant(plant, [(e.name, e.params) for e in found
-                                       if e.name != "unexplained"])
+        return corrected_plant(plant, [(n, p) for n, p in named if n != "unexplained"])
     except PlantError as exc:
         return plant, [f"the corrected plant is not valid ({exc}); the nominal one is kept"]
 
@@ -200,13 +199,14 @@ def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
     ranking = score_step(segs.est, cands, [], opts.alpha, opts.min_share)
     steps, _ = forward_select(segs.est, cands, opts.alpha, opts.min_share, opts.max_effects)
     model, held, dropped = confirmed_model(tuple(s.effect for s in steps), segs.est,
-                                           segs.val, opts.alpha)
+                                           segs.val, opts.alpha, opts.min_share)
     final, fdata = _final(model, segs)
+    final, held = _prune(final, fdata, held, n_tests, opts.alpha)
     found = _named(final, fdata, plant, list(held), model.alternatives, n_tests, opts)
     found += scan_unexplained(final, fdata, opts.alpha, opts.min_share)
-    corrected, notes = _correct(plant, found)
-    est_plant, _ = _correct(plant, _named(model.fit, segs.est, plant, list(held),
-                                          model.alternatives, n_tests, opts))
+    corrected, notes = _correct(plant, [(e.name, e.params) for e in found])
+    est_plant, _ = _correct(plant, [(e.name, effect_params(model.fit, k, plant)[0])
+                                    for k, e in enumerate(model.fit.effects)])
     table, replays = fit_table(plant, est_plant, model.fit, segs, opts.replay)
     notes += [f"{e.label()} was significant on the estimation data but not confirmed on "
               "held-out data; it is not reported" for e in dropped]
@@ -225,6 +225,22 @@ def _final(model: Model, segs: Segments) -> tuple[Fit, EquationData]:
     X, fixed = design(model.fit.effects, segs.full)
     _, r = lstsq(X, segs.full.y - fixed)
     return refine(model.fit.effects, segs.full, ar_whitener(r)), segs.full
+
+
+def _prune(fit: Fit, data: EquationData, held: list[Any], n_tests: float,
+           alpha: float) -> tuple[Fit, list[Any]]:
+    """Backward elimination on the final data: drop effects no longer significant."""
+    while fit.effects:
+        sigs = _drop_one(fit, data, n_tests)
+        k = int(np.argmin(sigs))
+        if sigs[k] >= -np.log10(alpha):
+            break
+        rest = fit.effects[:k] + fit.effects[k + 1:]
+        X, fixed = design(rest, data)
+        _, r = lstsq(X, data.y - fixed)
+        fit = refine(rest, data, ar_whitener(r))
+        held = held[:k] + held[k + 1:]
+    return fit, held
 
 
 def _rank_dict(s: Any) -> dict[str, Any]:

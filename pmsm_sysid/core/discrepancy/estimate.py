@@ -105,8 +105,9 @@ def with_eta(e: Effect, value: float) -> Effect:
 def _bounds(e: Effect, data: EquationData) -> tuple[float, float]:
     v = eta_of(e)
     if e.name in ("cogging", "thrust_ripple"):
-        step = 1.0 / (OVERSAMPLE * float(np.ptp(thinned(data, data.x))))
-        return max(v - 3 * step, 0.5 * v), v + 3 * step
+        travel = float(np.ptp(thinned(data, data.x)))
+        step = 1.0 / (OVERSAMPLE * travel)
+        return max(v - 3 * step, 0.5 * v, 0.9 / travel), v + 3 * step
     if e.name == "stribeck_friction":
         return v - math.log(2.0), v + math.log(2.0)
     return 0.0, max(5.0 * v, 4.0 * data.period)

@@ -157,7 +157,7 @@ class Family:
 def pitch_grid(data: EquationData) -> tuple[FloatArray, float]:
     """Candidate pitches (m) and the number of independent ones.
 
-    Wavenumbers 1/p from 2/R (two periods over the travel R) to fc/median|v| (a period is
+    Wavenumbers 1/p from 1/R (one period over the travel R) to fc/median|v| (a period is
     crossed slower than the filter's cut-off at the median speed), spaced 1/(4R): four-fold
     oversampling of the independent Fourier wavenumbers 1/R. Long travels would need more
     than ``MAX_PITCHES`` points: the spacing is then relaxed to 1/(2R) and, if still too
@@ -168,7 +168,7 @@ def pitch_grid(data: EquationData) -> tuple[FloatArray, float]:
     vmed = float(np.median(np.abs(thinned(data, data.v))))
     if travel <= 0 or vmed <= 0:
         return np.zeros(0), 0.0
-    k_lo = 2.0 / travel
+    k_lo = 1.0 / travel
     k_hi = MAX_CYCLE_HZ_FACTOR * data.filt.cutoff_hz / vmed
     over = OVERSAMPLE
     if (k_hi - k_lo) * travel * over > MAX_PITCHES:

@@ -2,8 +2,7 @@
 
 1. The linear thrust-derivative regressor becomes an exact first-order lag with τ started
    at its coefficient, and all nonlinear parameters are refined (:mod:`.estimate`).
-2. Cogging harmonics 2-4 and sub-harmonics (a true pitch 2p or 3p whose fundamental is
-   weak) are each put to the nested F-test, Bonferroni-corrected over the five tried.
+2. Cogging harmonics are re-tested at the refined pitch (:func:`.select.grow_cogging`).
 3. Look-alikes are told apart by the whitened residual energy of the two refined models
    with the same number of parameters, Δχ² = ΔSSE / s²: a transport delay replaces the lag
    only if it fits better by Δχ² > 3.84 (χ²₁ at 5 %), and Coulomb friction replaces a
@@ -16,7 +15,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -24,15 +22,13 @@ from numpy.typing import NDArray
 
 from .estimate import Fit, contributions, design, refine, whitened_sse
 from .kinematics import EquationData
-from .library import Effect, columns
-from .select import ALPHA
-from .stats import HeldOutTest, ar_whitener, held_out_test, lstsq, nested_f_test
+from .library import Effect
+from .select import ALPHA, MIN_SHARE, grow_cogging
+from .stats import HeldOutTest, ar_whitener, held_out_test, lstsq
 
 FloatArray = NDArray[np.float64]
 
 CHI2_1_95 = 3.84
-HARMONICS = (2, 3, 4)
-SUBHARMONICS = (2, 3)
 
 
 @dataclass(frozen=True)
@@ -77,32 +73,19 @@ def _dynamic_start(effects: tuple[Effect, ...], data: EquationData) -> tuple[Eff
     return tuple(out)
 
 
-def _add_cogging_orders(fit: Fit, data: EquationData, alpha: float) -> tuple[Effect, ...]:
-    """Effects with significant cogging harmonics / sub-harmonic pitch added (module doc)."""
+def _add_cogging_orders(fit: Fit, data: EquationData, alpha: float,
+                        min_share: float) -> tuple[Effect, ...]:
+    """Effects with the cogging harmonics re-tested at the refined pitch."""
     effects = fit.effects
     idx = [i for i, e in enumerate(effects) if e.name == "cogging"]
     if not idx:
         return effects
     k = idx[0]
-    cog = effects[k]
-    X, fixed = design(effects, data)
-    y = data.y - fixed
-    n_tests = len(HARMONICS) + len(SUBHARMONICS)
-    keep = []
-    for h in HARMONICS:
-        if h in cog.orders:
-            continue
-        cols = columns(replace(cog, orders=(h,)), data)
-        if nested_f_test(y, X, cols).corrected_log10_p(n_tests) < math.log10(alpha):
-            keep.append(h)
-    orders = tuple(sorted(set(cog.orders) | set(keep)))
-    for m in SUBHARMONICS:
-        cols = columns(replace(cog, pitch_m=cog.pitch_m * m, orders=(1,)), data)
-        if nested_f_test(y, X, cols).corrected_log10_p(n_tests) < math.log10(alpha):
-            new = replace(cog, pitch_m=cog.pitch_m * m,
-                          orders=tuple(sorted({1} | {m * h for h in orders})))
-            return (*effects[:k], new, *effects[k + 1:])
-    return (*effects[:k], replace(cog, orders=orders), *effects[k + 1:])
+    others = (*effects[:k], *effects[k + 1:])
+    X, fixed = design(others, data)
+    cog = replace(effects[k], orders=(1,)) if 1 in effects[k].orders else effects[k]
+    grown = grow_cogging(cog, data, X, data.y - fixed, alpha, min_share)
+    return (*effects[:k], grown, *effects[k + 1:])
 
 
 def _swap(effects: tuple[Effect, ...], k: int, other: Effect) -> tuple[Effect, ...]:
@@ -132,14 +115,14 @@ def _value(e: Effect) -> float:
 
 
 def build_model(effects: tuple[Effect, ...], data: EquationData,
-                alpha: float = ALPHA) -> Model:
+                alpha: float = ALPHA, min_share: float = MIN_SHARE) -> Model:
     """Steps 1-3 of the module doc on the estimation data."""
     if not effects:
         poly = _poly_for(effects, data)
         return Model(refine(effects, data, poly), {})
     start = _dynamic_start(effects, data)
     fit = refine(start, data, _poly_for(start, data))
-    grown = _add_cogging_orders(fit, data, alpha)
+    grown = _add_cogging_orders(fit, data, alpha, min_share)
     if grown != fit.effects:
         fit = refine(grown, data, fit.poly)
     alts: dict[str, Alternative] = {}
@@ -163,12 +146,13 @@ def held_out(fit: Fit, data: EquationData) -> list[HeldOutTest]:
 
 
 def confirmed_model(effects: tuple[Effect, ...], est: EquationData, val: EquationData,
-                    alpha: float = ALPHA) -> tuple[Model, list[HeldOutTest], list[Effect]]:
+                    alpha: float = ALPHA, min_share: float = MIN_SHARE,
+                    ) -> tuple[Model, list[HeldOutTest], list[Effect]]:
     """Build, confirm on ``val``, drop the weakest unconfirmed effect, repeat (step 4)."""
     dropped: list[Effect] = []
     current = effects
     while True:
-        model = build_model(current, est, alpha)
+        model = build_model(current, est, alpha, min_share)
         tests = held_out(model.fit, val)
         failing = [(t.z, i) for i, t in enumerate(tests) if not t.confirmed]
         if not failing:

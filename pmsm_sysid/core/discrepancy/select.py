@@ -14,12 +14,12 @@ largest ERR is accepted; the search stops when none passes.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .kinematics import EquationData
+from .kinematics import EquationData, thinned
 from .library import Effect, Family, columns, families, family_columns
 from .stats import NestedTest, lstsq, nested_f_test
 
@@ -28,6 +28,8 @@ FloatArray = NDArray[np.float64]
 ALPHA = 1e-3
 MIN_SHARE = 0.01
 MAX_EFFECTS = 6
+HARMONICS = (2, 3, 4)
+SUBHARMONICS = (2, 3)
 
 
 @dataclass(frozen=True)
@@ -127,9 +129,57 @@ def forward_select(data: EquationData, cands: Candidates, alpha: float = ALPHA,
         passing = [s for s in scored if s.accepted]
         if not passing:
             return steps, scored
-        steps.append(passing[0])
-        chosen.append(passing[0].effect)
+        step = passing[0]
+        if step.effect.name == "cogging":
+            grown = grow_cogging(step.effect, data, _stack(chosen, data), data.y, alpha,
+                                 min_share)
+            step = replace(step, effect=grown)
+        steps.append(step)
+        chosen.append(step.effect)
     return steps, []
+
+
+def _passes(y: FloatArray, X: FloatArray, cols: FloatArray, n_tests: int, alpha: float,
+            min_share: float, total: float) -> bool:
+    """Significant (Bonferroni over ``n_tests``) and explains ``min_share`` of ``total``."""
+    _, r0 = lstsq(X, y)
+    _, r1 = lstsq(np.hstack([X, cols]), y)
+    share = float(r0 @ r0 - r1 @ r1) / total
+    return bool(nested_f_test(y, X, cols).corrected_log10_p(n_tests) < math.log10(alpha)
+                and share >= min_share)
+
+
+def grow_cogging(cog: Effect, data: EquationData, others: FloatArray, y: FloatArray,
+                 alpha: float, min_share: float) -> Effect:
+    """``cog`` with its significant harmonics, or at a sub-harmonic pitch.
+
+    Harmonics 2-4 and sub-harmonic pitches 2p, 3p (a true pitch whose fundamental is weak;
+    tried only if the travel covers one such period) are each put to the nested F-test
+    against the other effects plus the cogging found so far, Bonferroni-corrected over the
+    five tried, and must explain ``min_share`` of the mismatch.
+    """
+    n_tests = len(HARMONICS) + len(SUBHARMONICS)
+    total = float(data.y @ data.y)
+    orders = cog.orders
+    while True:  # harmonics enter one at a time, the strongest first (they correlate
+        X = np.hstack([others, columns(replace(cog, orders=orders), data)])  # on short travel)
+        tried = [(share_of(y, X, c), h, c) for h in HARMONICS if h not in orders
+                 for c in [columns(replace(cog, orders=(h,)), data)]]
+        if not tried:
+            break
+        _, h, c = max(tried, key=lambda t: t[0])
+        if not _passes(y, X, c, n_tests, alpha, min_share, total):
+            break
+        orders = tuple(sorted((*orders, h)))
+    travel = float(np.ptp(thinned(data, data.x)))
+    for m in SUBHARMONICS:
+        if m * cog.pitch_m > travel:
+            break
+        cols = columns(replace(cog, pitch_m=cog.pitch_m * m, orders=(1,)), data)
+        if _passes(y, X, cols, n_tests, alpha, min_share, total):
+            return replace(cog, pitch_m=cog.pitch_m * m,
+                           orders=tuple(sorted({1} | {m * h for h in orders})))
+    return replace(cog, orders=orders)
 
 
 def _stack(effects: list[Effect], data: EquationData) -> FloatArray:
