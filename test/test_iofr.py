@@ -20,7 +20,7 @@ from pmsm_sysid.core.candidates import candidate_set
 from pmsm_sysid.core.identify import FitConfig, fit_narx
 from pmsm_sysid.core.iofr import _Problem, iofr
 from pmsm_sysid.core.model import Structure
-from pmsm_sysid.core.ofr import frols, least_squares
+from pmsm_sysid.core.ofr import frols, least_squares, start
 from pmsm_sysid.core.regressors import ExplicitRegressors, lag_base, target
 
 SYSTEMS = {"linear": (LINEAR, 1), "quadratic": (QUADRATIC, 2), "cubic": (CUBIC, 3),
@@ -91,8 +91,13 @@ def _small(seed: int):
 @pytest.mark.parametrize("remove_dc", [True, False])
 def test_swap_formula_equals_brute_force_least_squares(remove_dc: bool) -> None:
     cs, proj, t = _small(0)
-    pb = _Problem(proj, t, remove_dc, 0)
-    free = [5, 9, 17, 26]
+    st0 = start(proj, t, remove_dc)
+    path = frols(proj, t, 5, remove_dc=remove_dc, keep_basis=True, init=st0)
+    pb = _Problem(proj, st0, 0, path)
+    on_path = [int(j) for j in path.selected[(1 if remove_dc else 0):]]
+    # two terms whose P^T p_s rows come from the FROLS basis, two projected on demand
+    free = [on_path[1], on_path[3], *[j for j in (5, 9, 17, 26) if j not in on_path][:2]]
+    assert len(free) == 4
     sw = pb.swaps(free)
     fixed = [np.ones(len(t))] if remove_dc else []
 
@@ -110,7 +115,7 @@ def test_swap_formula_equals_brute_force_least_squares(remove_dc: bool) -> None:
             new = free.copy()
             new[i] = j
             assert sw.swap[i, j] == pytest.approx(sse(new), rel=1e-7, abs=1e-9 * pb.sst)
-    for j in (1, 2, 27):
+    for j in [c for c in range(1, cs.n_candidates) if c not in free][:4]:
         assert sw.add[j] == pytest.approx(sse([*free, j]), rel=1e-8)
 
 

@@ -29,9 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg import solve_triangular
 
 from .errors import IdentificationError
-from .ofr import DEPENDENCE_TOL, OfrResult, frols, information_criterion
+from .ofr import DEPENDENCE_TOL, OfrResult, Start, frols, information_criterion, start
 from .regressors import DenseProjector, Projector
 
 FloatArray = NDArray[np.float64]
@@ -53,23 +54,37 @@ class _Swaps:
 
 
 class _Problem:
-    def __init__(self, proj: Projector, y: FloatArray, remove_dc: bool, const: int | None):
-        self.proj, self.remove_dc, self.const = proj, remove_dc, const
-        self.ref = proj.norms2()
-        if remove_dc:
-            sums = proj.project(np.ones_like(y))
-            self.s0 = self.ref - sums * (sums / len(y))
-            self.t = y - y.mean()
-        else:
-            self.s0, self.t = self.ref.copy(), np.asarray(y, dtype=np.float64)
-        self.sst = float(self.t @ self.t)
+    """The candidate set, target and a cache of P^T p_s for the selected columns s.
+
+    Swapping needs C = Q^T P for the current set's orthonormal basis Q. With P_S = Q R,
+    C = R^{-T} (P_S^T P), and the rows p_s^T P are cached: those of the FROLS path come free
+    from its stored basis projections (p_s = sum_i r_is q_i), so an exchange costs one new
+    projection per swapped-in candidate instead of one per selected term.
+    """
+
+    def __init__(self, proj: Projector, st0: Start, const: int | None, path: OfrResult):
+        self.proj, self.remove_dc = proj, st0.remove_dc
+        self.ref, self.s0, self.a0, self.t = st0.ref, st0.s0, st0.a0, st0.t
+        self.sst = st0.sst
         self.allowed = self.s0 > DEPENDENCE_TOL * self.ref
-        if remove_dc and const is not None:
+        if self.remove_dc and const is not None:
             self.allowed[const] = False
+        self._rows: dict[int, FloatArray] = {}
+        n_fixed = 1 if self.remove_dc else 0
+        if len(path.basis_proj):
+            for k, j in enumerate(path.selected[n_fixed:].tolist()):
+                self._rows[j] = path.rcoef[: k + 1, k] @ path.basis_proj[: k + 1]
 
     def cols(self, free: list[int]) -> FloatArray:
         c = self.proj.columns(np.array(free, dtype=np.intp))
         return c - c.mean(axis=0) if self.remove_dc else c
+
+    def rows(self, free: list[int]) -> FloatArray:
+        """P^T p_s (centred p_s with the d.c. level removed) for each s in ``free``."""
+        for j in free:
+            if j not in self._rows:
+                self._rows[j] = self.proj.project(self.cols([j])[:, 0])
+        return np.stack([self._rows[j] for j in free])
 
     def sse(self, free: list[int]) -> float:
         q, _ = np.linalg.qr(self.cols(free))
@@ -78,18 +93,19 @@ class _Problem:
 
     def swaps(self, free: list[int]) -> _Swaps:
         q, rmat = np.linalg.qr(self.cols(free))
-        if np.any(np.abs(np.diag(rmat)) <= 1e-12 * np.abs(np.diag(rmat)).max()):
+        diag = np.abs(np.diag(rmat))
+        if np.any(diag <= 1e-12 * diag.max()):
             raise IdentificationError("selected terms became linearly dependent")
-        qt = q.T @ self.t
-        r = self.t - q @ qt
+        z = q.T @ self.t
+        r = self.t - q @ z
         sse = float(r @ r)
-        a = self.proj.project(r)
-        cq = np.stack([self.proj.project(q[:, i]) for i in range(q.shape[1])])
+        cq = solve_triangular(rmat, self.rows(free), trans="T")  # Q^T P
+        a = self.a0 - cq.T @ z
         s = np.maximum(self.s0 - np.einsum("ij,ij->j", cq, cq), 0.0)
-        rinv = np.linalg.solve(rmat, np.eye(len(free)))
+        rinv = solve_triangular(rmat, np.eye(len(free)))
         dn = np.linalg.norm(rinv, axis=1)
         b = (rinv @ cq) / dn[:, None]
-        vy = (rinv @ qt) / dn
+        vy = (rinv @ z) / dn
         ok = self.allowed.copy()
         ok[free] = False
         add = np.full(len(a), np.inf)
@@ -169,12 +185,22 @@ def _target_size(path: OfrResult, n_terms: int, criterion: str, rho: float | Non
 
 
 def _prune(pb: _Problem, free: list[int], size: int) -> list[int]:
-    """Backward elimination: drop the term whose removal raises the SSE least."""
+    """Backward elimination: drop the term whose removal raises the SSE least.
+
+    One QR of the columns, then each removal re-triangularises R without that column
+    (P_S' = Q R' = (Q Q2) R2 with R' = Q2 R2), so the loop works on n x n matrices only."""
+    free = list(free)
+    if len(free) <= max(size, 1):
+        return free
+    q, rmat = np.linalg.qr(pb.cols(free))
+    z = q.T @ pb.t
     while len(free) > max(size, 1):
-        q, rmat = np.linalg.qr(pb.cols(free))
-        rinv = np.linalg.solve(rmat, np.eye(len(free)))
-        vy = (rinv @ (q.T @ pb.t)) / np.linalg.norm(rinv, axis=1)
-        del free[int(np.argmin(vy * vy))]
+        rinv = solve_triangular(rmat, np.eye(len(free)))
+        vy = (rinv @ z) / np.linalg.norm(rinv, axis=1)
+        i = int(np.argmin(vy * vy))
+        del free[i]
+        q2, rmat = np.linalg.qr(np.delete(rmat, i, axis=1))
+        z = q2.T @ z
     return free
 
 
@@ -200,10 +226,12 @@ def iofr(
     exchanges.
     """
     y = np.asarray(y, dtype=np.float64)
-    path = frols(proj, y, 2 * n_terms, remove_dc=remove_dc, constant_index=constant_index)
+    st0 = start(proj, y, remove_dc)
+    path = frols(proj, y, 2 * n_terms, remove_dc=remove_dc, constant_index=constant_index,
+                 keep_basis=True, init=st0)
     n_fixed = 1 if remove_dc else 0
     size = _target_size(path, n_terms, criterion, rho, len(y))
-    pb = _Problem(proj, y, remove_dc, constant_index)
+    pb = _Problem(proj, st0, constant_index, path)
     pruned = _prune(pb, [int(j) for j in path.selected[n_fixed : n_fixed + 2 * size]], size)
     greedy = [int(j) for j in path.selected[n_fixed : n_fixed + size]]
     free = pruned if pb.sse(pruned) <= path.sse[size] else greedy

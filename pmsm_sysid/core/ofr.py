@@ -27,7 +27,7 @@ Exact ties are broken by the lowest candidate index (``argmax`` takes the first)
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,6 +43,34 @@ CRITERIA = ("terms", "err", "aic", "bic")
 
 
 @dataclass(frozen=True)
+class Start:
+    """Quantities every search over one (projector, target) pair starts from."""
+
+    ref: FloatArray  # ||p_j||^2 of the raw columns (dependence threshold reference)
+    s0: FloatArray  # ||p_j||^2, or ||p_j - mean||^2 with the d.c. level removed
+    a0: FloatArray  # P^T t
+    t: FloatArray  # the target: y, or y - mean(y)
+    remove_dc: bool
+
+    @property
+    def sst(self) -> float:
+        return float(self.t @ self.t)
+
+
+def start(proj: Projector, y: FloatArray, remove_dc: bool) -> Start:
+    """Column norms and the target's projections (centred with ``remove_dc``)."""
+    y = np.asarray(y, dtype=np.float64)
+    ref = proj.norms2()
+    if remove_dc:
+        sums = proj.project(np.ones_like(y))
+        s0 = ref - sums * (sums / len(y))
+        t = y - y.mean()
+    else:
+        s0, t = ref.copy(), y.copy()
+    return Start(ref=ref, s0=s0, a0=proj.project(t), t=t, remove_dc=remove_dc)
+
+
+@dataclass(frozen=True)
 class OfrResult:
     """Selected candidates in order, with the ERR of each and the residual path."""
 
@@ -53,6 +81,8 @@ class OfrResult:
     remove_dc: bool
     n_forced: int
     n_skipped: int  # candidates skipped as numerically dependent when selection ended
+    basis_proj: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))  # P^T q_i rows
+    rcoef: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))  # p_s = sum r_is q_i
 
     @property
     def n_params(self) -> int:
@@ -74,50 +104,57 @@ class _State:
     usable: NDArray[np.bool_]
     r: FloatArray
     q: FloatArray  # (rows, capacity) orthonormal basis of the chosen terms
+    rcoef: FloatArray  # (capacity, capacity) column i: coefficients of term i in q
+    proj_rows: list[FloatArray]
     n_q: int = 0
 
 
-def _start(proj: Projector, y: FloatArray, remove_dc: bool, capacity: int) -> _State:
-    ref = proj.norms2()
-    if remove_dc:
-        sums = proj.project(np.ones_like(y))
-        s = ref - sums * (sums / len(y))
-        r = y - y.mean()
-    else:
-        s, r = ref.copy(), y.copy()
-    a = proj.project(r)
-    usable = s > DEPENDENCE_TOL * ref
-    q = np.empty((len(y), capacity), dtype=np.float64, order="F")
-    return _State(a=a, s=s, ref=ref, usable=usable, r=r, q=q)
+def _state(st0: Start, capacity: int) -> _State:
+    usable = st0.s0 > DEPENDENCE_TOL * st0.ref
+    q = np.empty((len(st0.t), capacity), dtype=np.float64, order="F")
+    return _State(a=st0.a0.copy(), s=st0.s0.copy(), ref=st0.ref, usable=usable,
+                  r=st0.t.copy(), q=q, rcoef=np.zeros((capacity, capacity)), proj_rows=[])
 
 
-def _orthonormal(st: _State, w: FloatArray) -> tuple[FloatArray, float]:
-    """Re-orthogonalise w against the chosen basis twice (CGS2); return q and ||w||^2."""
+def _orthonormal(st: _State, w: FloatArray) -> tuple[FloatArray, float, FloatArray]:
+    """Re-orthogonalise w against the chosen basis twice (CGS2).
+
+    Returns q, ||w_orth||^2 and the coefficients of w on the previous basis vectors."""
     basis = st.q[:, : st.n_q]
+    coef = np.zeros(st.n_q)
     for _ in range(2):
         if st.n_q:
-            w = w - basis @ (basis.T @ w)
+            c = basis.T @ w
+            w = w - basis @ c
+            coef += c
     nw2 = float(w @ w)
-    return w / np.sqrt(nw2) if nw2 > 0 else w, nw2
+    return (w / np.sqrt(nw2) if nw2 > 0 else w), nw2, coef
 
 
-def _take(proj: Projector, st: _State, j: int, remove_dc: bool) -> float | None:
-    """Add candidate j to the basis; return q^T r (None if it proved dependent)."""
+def _take(proj: Projector, st: _State, j: int, remove_dc: bool, update: bool) -> float | None:
+    """Add candidate j to the basis; return q^T r (None if it proved dependent).
+
+    ``update=False`` skips the projection of the new basis vector (last step of a search
+    that keeps no basis)."""
     w = proj.columns(np.array([j], dtype=np.intp))[:, 0]
     if remove_dc:
         w = w - w.mean()
     st.usable[j] = False
-    q, nw2 = _orthonormal(st, w)
+    q, nw2, coef = _orthonormal(st, w)
     if not nw2 > DEPENDENCE_TOL * st.ref[j]:
         return None
     g = float(q @ st.r)
     st.r -= g * q
     st.q[:, st.n_q] = q
+    st.rcoef[: st.n_q, st.n_q] = coef
+    st.rcoef[st.n_q, st.n_q] = np.sqrt(nw2)
     st.n_q += 1
-    c = proj.project(q)
-    st.s -= c * c
-    st.a -= g * c
-    st.usable &= st.s > DEPENDENCE_TOL * st.ref
+    if update:
+        c = proj.project(q)
+        st.proj_rows.append(c)
+        st.s -= c * c
+        st.a -= g * c
+        st.usable &= st.s > DEPENDENCE_TOL * st.ref
     return g
 
 
@@ -137,54 +174,63 @@ def frols(
     constant_index: int | None = 0,
     rho: float | None = None,
     forced: Sequence[int] = (),
+    keep_basis: bool = False,
+    init: Start | None = None,
 ) -> OfrResult:
     """Select up to ``n_terms`` candidates by largest ERR (seed Eq. 4).
 
     ``y`` is the regression target aligned with the projector's rows. With ``remove_dc`` the
     constant (``constant_index``, required) is forced first. ``forced`` candidates are taken
-    next in the given order (used by iOFR). ``rho`` stops early once 1 - sum(ERR) < rho.
+    next in the given order. ``rho`` stops early once 1 - sum(ERR) < rho. ``keep_basis``
+    stores P^T q_i for every basis vector and the triangular coefficients (for iOFR);
+    ``init`` reuses :func:`start` quantities computed before.
     """
-    y = np.asarray(y, dtype=np.float64)
     if remove_dc and constant_index is None:
         raise IdentificationError("removing the d.c. level needs a constant candidate")
     if n_terms < 1:
         raise IdentificationError(f"need at least one term (got {n_terms})")
+    st0 = init if init is not None else start(proj, y, remove_dc)
     forced = [int(j) for j in forced]
-    st = _start(proj, y, remove_dc, min(len(forced) + n_terms, proj.n_candidates, len(y)))
-    sst = float(st.r @ st.r)
+    capacity = min(len(forced) + n_terms, proj.n_candidates, len(st0.t))
+    st = _state(st0, capacity)
+    sst = st0.sst
     if not sst > 0:
         raise IdentificationError("the output is constant: nothing to explain")
     selected: list[int] = []
     err: list[float] = []
     sse = [sst]
+
+    def add(j: int, last: bool) -> bool:
+        g = _take(proj, st, j, remove_dc, update=keep_basis or not last)
+        if g is None:
+            return False
+        selected.append(j)
+        err.append(g * g / sst)
+        sse.append(float(st.r @ st.r))
+        return True
+
     if remove_dc:  # the d.c. level: centring already removed it (no basis vector)
         st.usable[constant_index] = False
         selected.append(int(constant_index))  # type: ignore[arg-type]
         err.append(0.0)
     for j in forced:
-        g = _take(proj, st, j, remove_dc)
-        if g is None:
+        if not add(j, last=False):
             raise IdentificationError(f"forced candidate {j} is linearly dependent")
-        selected.append(j)
-        err.append(g * g / sst)
-        sse.append(float(st.r @ st.r))
     n_first = len(selected)
-    while len(selected) - n_first < n_terms and st.n_q < st.q.shape[1]:
+    while len(selected) - n_first < n_terms and st.n_q < capacity:
         if rho is not None and len(selected) > n_first and 1.0 - sum(err) < rho:
             break
         best = _best(st)
         if best is None:
             break
-        g = _take(proj, st, best, remove_dc)
-        if g is None:
-            continue
-        selected.append(best)
-        err.append(g * g / sst)
-        sse.append(float(st.r @ st.r))
+        add(best, last=len(selected) - n_first + 1 >= n_terms or st.n_q + 1 >= capacity)
+    k = st.n_q
     return OfrResult(
         selected=np.array(selected, dtype=np.intp), err=np.array(err), sse=np.array(sse),
         sst=sst, remove_dc=remove_dc, n_forced=n_first,
         n_skipped=int(np.count_nonzero(~st.usable)) - len(selected),
+        basis_proj=np.array(st.proj_rows) if keep_basis else np.zeros((0, 0)),
+        rcoef=st.rcoef[:k, :k].copy() if keep_basis else np.zeros((0, 0)),
     )
 
 
