@@ -144,9 +144,11 @@ class MotorSimulator:
     def __init__(self, plant: Plant, seed: int = 0, x0: float = 0.0, v0: float = 0.0) -> None:
         if not (math.isfinite(x0) and math.isfinite(v0)):
             raise PlantError(f"initial state must be finite, got x0={x0}, v0={v0}")
-        meas_seq, force_seq = np.random.SeedSequence(int(seed)).spawn(2)
+        meas_seq, force_seq, thrust_seq = np.random.SeedSequence(int(seed)).spawn(3)
         self._rng_meas = np.random.Generator(np.random.PCG64(meas_seq))
         self._rng_force = np.random.Generator(np.random.PCG64(force_seq))
+        self._rng_thrust = np.random.Generator(np.random.PCG64(thrust_seq))
+        self._zt = 0.0
         self._x, self._v, self._f = float(x0), float(v0), 0.0
         self._k = 0
         self._history: deque[float] = deque(maxlen=_HISTORY_MIN)
@@ -189,6 +191,14 @@ class MotorSimulator:
             speed = _quantise(speed, quant.speed_mps)
             position = _quantise(position, quant.position_m)
         return speed, position
+
+    def measured_thrust(self, thrust: float) -> float:
+        """The thrust a sensor records for the command ``thrust`` applied at this sample
+        (the command itself unless the noise block has ``thrust_std``)."""
+        noise = self._plant.noise
+        if noise is None or noise.thrust_std == 0.0:
+            return float(thrust)
+        return float(thrust) + noise.thrust_std * self._zt
 
     def advance(self, thrust: float) -> None:
         """Hold ``thrust`` (N) for one sample period and step the state to t_{k+1}."""
@@ -246,6 +256,7 @@ class MotorSimulator:
         self._fric_rate = friction_rate(plant)
 
     def _draw_measurement(self) -> tuple[float, float]:
+        self._zt = float(self._rng_thrust.standard_normal())
         z = self._rng_meas.standard_normal(2)
         return float(z[0]), float(z[1])
 
@@ -355,12 +366,14 @@ def simulate(plant: Plant, thrust: ArrayLike, seed: int = 0, x0: float = 0.0, v0
     n = len(u)
     speed = np.empty(n)
     position = np.empty(n)
+    recorded = np.empty(n)
     for k in range(n):
         speed[k], position[k] = sim.measure()
+        recorded[k] = sim.measured_thrust(u[k])
         sim.advance(u[k])
     fs = plant.sample_rate_hz
     meta = {"plant": json.dumps(plant_to_dict(plant), sort_keys=True), "seed": str(seed),
             "simulator": "pmsm_sysid.core.physics"}
-    return Recording(t=t0 + np.arange(n) / fs, thrust=u.copy(), speed=speed,
+    return Recording(t=t0 + np.arange(n) / fs, thrust=recorded, speed=speed,
                      position=position, sample_rate_hz=fs, source="simulate", meta=meta)
 

@@ -109,12 +109,15 @@ class Noise:
     """White Gaussian noise. Measurement: ``speed_std`` (m/s), ``position_std`` (m).
 
     ``force_std`` (N) is a process disturbance force, drawn once per sample and held over the
-    sample period. The simulator's seed drives all draws.
+    sample period. ``thrust_std`` (N) is thrust *sensor* noise: the recorded thrust is the
+    applied command plus this noise (errors in the input variable, as with a current-sensor
+    based thrust reading). The simulator's seed drives all draws.
     """
 
     speed_std: float = 0.0
     position_std: float = 0.0
     force_std: float = 0.0
+    thrust_std: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -187,7 +190,8 @@ _RULES: dict[str, str] = {
     "mass_kg": ">0", "viscous_n_per_mps": ">=0", "rs_ohm": ">0", "ls_h": ">0", "flux_wb": ">0",
     "sample_rate_hz": ">0", "substeps": ">0", "pitch_m": ">0", "velocity_mps": ">0",
     "smoothing_mps": ">0", "tau_s": ">=0", "delay_s": ">=0", "stiffness_n_per_m": ">=0",
-    "speed_std": ">=0", "position_std": ">=0", "force_std": ">=0", "position_m": ">=0",
+    "speed_std": ">=0", "position_std": ">=0", "force_std": ">=0", "thrust_std": ">=0",
+    "position_m": ">=0",
     "speed_mps": ">=0", "order": ">0", "relative": "|<1", "static_n": ">=0",
 }
 
