@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
 from .common import parse_range, write_json
@@ -121,6 +122,7 @@ def run(args: argparse.Namespace) -> int:
         validate=None if args.no_validate else args.validate, max_lag_corr=args.corr_lags,
     )
     d = result.to_dict()
+    d["source"] = str(Path(args.bag).resolve())  # the recording, for 'report' figures
     out = sys.stderr if args.json == "-" else sys.stdout
     st = d["structure"]
     print(f"{d['input']} -> {d['output']}: {args.method}, {len(d['terms'])} terms of "
