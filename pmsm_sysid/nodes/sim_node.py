@@ -224,7 +224,7 @@ class MotorSimNode(Node):
             m = self._msgs
             for msg in m.values():
                 msg.header.stamp = stamp
-            m[THRUST].wrench.force.x = u
+            m[THRUST].wrench.force.x = self.stepper.sim.measured_thrust(u)
             m[SPEED].twist.linear.x = speed
             m[POSITION].point.x = position
             for sig in (THRUST, SPEED, POSITION):
