@@ -47,6 +47,7 @@ class CandidateSet:
     index: IntArray  # (M, degree) rows of indices into the extended base, non-decreasing
     base_terms: tuple[Term, ...]  # the extended base: const, y(k-1)..y(k-ny), u(k-d)..
     terms: tuple[Term, ...]
+    term_names: tuple[str, ...] = ()
 
     @property
     def n_candidates(self) -> int:
@@ -59,7 +60,7 @@ class CandidateSet:
 
     @property
     def names(self) -> list[str]:
-        return [t.name for t in self.terms]
+        return list(self.term_names)
 
     def position(self, term: Term | str) -> int:
         """Index of ``term`` (a Term or a seed-style name) in this set."""
@@ -104,7 +105,8 @@ def candidate_set(structure: Structure) -> CandidateSet:
         Term(tuple(f for i in row if i for f in base[i].factors)) for row in rows.tolist()
     )
     rows.setflags(write=False)
-    return CandidateSet(structure=structure, index=rows, base_terms=base, terms=terms)
+    return CandidateSet(structure=structure, index=rows, base_terms=base, terms=terms,
+                        term_names=tuple(t.name for t in terms))
 
 
 @lru_cache(maxsize=32)

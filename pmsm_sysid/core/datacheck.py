@@ -58,14 +58,17 @@ def _finite(name: str, x: FloatArray) -> None:
         )
 
 
-def pe_order(u: FloatArray, structure: Structure) -> int:
-    """Effective persistent-excitation order of u over the nu input lags (module doc)."""
+def pe_order(u: FloatArray, structure: Structure, u_lags: FloatArray | None = None) -> int:
+    """Effective persistent-excitation order of u over the nu input lags (module doc).
+
+    ``u_lags`` may pass the (rows x nu) lagged input columns when they exist already."""
     nu, lag = structure.nu, structure.max_lag
     if nu == 0:
         return 0
-    n, d = len(u), structure.delay
-    cols = np.stack([u[lag - d - j : n - d - j] for j in range(nu)], axis=1)
-    eig = np.linalg.eigvalsh(cols.T @ cols)
+    if u_lags is None:
+        n, d = len(u), structure.delay
+        u_lags = np.stack([u[lag - d - j : n - d - j] for j in range(nu)], axis=1)
+    eig = np.linalg.eigvalsh(u_lags.T @ u_lags)
     top = float(eig.max())
     return int(np.count_nonzero(eig > PE_REL_EIG * top)) if top > 0 else 0
 
@@ -73,8 +76,18 @@ def pe_order(u: FloatArray, structure: Structure) -> int:
 def check_fit_data(
     y: FloatArray, u: FloatArray, structure: Structure, n_params: int,
     input_name: str = "input", output_name: str = "output",
+    u_lags: FloatArray | None = None,
 ) -> DataCheck:
     """Raise on unusable data; return what the data support (with warnings)."""
+    validate_fit_data(y, u, structure, n_params, input_name, output_name)
+    return describe_fit_data(u, structure, input_name, u_lags)
+
+
+def validate_fit_data(
+    y: FloatArray, u: FloatArray, structure: Structure, n_params: int,
+    input_name: str = "input", output_name: str = "output",
+) -> None:
+    """The raising half of :func:`check_fit_data`."""
     y = np.asarray(y, dtype=np.float64)
     u = np.asarray(u, dtype=np.float64)
     if y.ndim != 1 or u.shape != y.shape:
@@ -92,12 +105,20 @@ def check_fit_data(
             f"{input_name} is constant in the estimation data: nothing excites the system")
     if float(np.ptp(y[lag:])) == 0.0:
         raise InsufficientExcitationError(f"{output_name} is constant in the estimation data")
-    order = pe_order(u, structure)
+
+
+def describe_fit_data(
+    u: FloatArray, structure: Structure, input_name: str = "input",
+    u_lags: FloatArray | None = None,
+) -> DataCheck:
+    """The non-raising half: persistent-excitation order and warnings."""
+    n = len(u)
+    order = pe_order(np.asarray(u, dtype=np.float64), structure, u_lags)
     warnings: list[str] = []
     if order < structure.nu:
         warnings.append(
             f"{input_name} is persistently exciting of order {order} only (< nu = {structure.nu} "
             f"input lags): input-lag terms are not unique and the model holds for inputs like "
             f"this one (e.g. a single tone gives order 2)")
-    return DataCheck(n_samples=n, n_rows=n - lag, pe_order=order, pe_required=structure.nu,
-                     warnings=tuple(warnings))
+    return DataCheck(n_samples=n, n_rows=n - structure.max_lag, pe_order=order,
+                     pe_required=structure.nu, warnings=tuple(warnings))

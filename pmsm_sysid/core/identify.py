@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .candidates import candidate_set
-from .datacheck import DataCheck, check_fit_data
+from .datacheck import DataCheck, describe_fit_data, validate_fit_data
 from .errors import IdentificationError
 from .iofr import iofr
 from .model import NarxModel, Structure
@@ -125,11 +125,13 @@ def fit_narx(
     """
     t0 = time.perf_counter()
     st = config.structure
-    check = check_fit_data(y, u, st, config.n_terms + (1 if config.dc_removed else 0))
+    n_params = config.n_terms + (1 if config.dc_removed else 0)
+    validate_fit_data(y, u, st, n_params, input_name, output_name)
     y = np.asarray(y, dtype=np.float64)
     u = np.asarray(u, dtype=np.float64)
     cset = candidate_set(st)
     base = lag_base(y, u, st)
+    check = describe_fit_data(u, st, input_name, base[:, 1 + st.ny :])
     t = target(y, st)
     proj = make_projector(base, cset, config.engine)
     t1 = time.perf_counter()
@@ -148,7 +150,7 @@ def fit_narx(
         model=model, n_candidates=cset.n_candidates, timing_ms=timing,
         criterion_values=_criterion_path(greedy, len(t), config.criterion),
         sum_err=float(np.sum(res.err)), method=config.method, criterion=config.criterion,
-        greedy_terms=tuple(cset.terms[i].name for i in greedy.selected.tolist()),
+        greedy_terms=tuple(cset.term_names[i] for i in greedy.selected.tolist()),
         n_swaps=n_swaps, dc_removed=config.dc_removed, data_check=check,
         residuals=ls.residuals,
     )
