@@ -1,0 +1,237 @@
+"""``build_report``: a recording or a result JSON to ``DIR/index.html`` and its PNGs.
+
+=====================  =====================================================================
+input                  report
+=====================  =====================================================================
+recording (bag dir)    identify with the given protocol (default: the paper's speed case),
+                       then GFRFs; every figure; ``identify.json`` and ``gfrf.json`` beside
+identify JSON          its model's figures; the time-domain ones from the recording named
+                       by its ``source`` key (when found; otherwise the page says why)
+``run --json`` summary its ``last_model`` as an identify JSON without a recording
+gfrf JSON              peak and ridge tables; the GFRF figures when it carries ``grid``
+diagnose JSON          its tables (see :mod:`.diagnose`)
+=====================  =====================================================================
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..core.errors import DataError, SysIdError
+from ..core.identify import FitConfig
+from .html import Facts, Section, write_page
+from .sink import Sink
+
+SERIES_FIGURES = 6  # io, psd, predicted x2, correlation (+1 spare for validation absent)
+FREQ_FIGURES = 4
+
+
+@dataclass(frozen=True)
+class ReportOptions:
+    """Identification protocol used when the report starts from a recording."""
+
+    input: str = "thrust"
+    output: str = "speed"
+    config: FitConfig = field(default_factory=FitConfig)
+    estimate: tuple[int, int] = (1000, 2000)
+    validate: tuple[int, int] | None = (3000, 4000)
+    corr_lags: int = 20
+
+
+@dataclass(frozen=True)
+class ReportResult:
+    """What was written; ``data`` holds, per figure name, what that figure drew."""
+
+    index: Path
+    kind: str
+    figures: tuple[Path, ...]
+    data: Mapping[str, Mapping[str, Any]]
+    notes: tuple[str, ...] = ()
+    extra_files: tuple[Path, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"index": str(self.index), "kind": self.kind,
+                "figures": [p.name for p in self.figures],
+                "files": [p.name for p in self.extra_files], "notes": list(self.notes)}
+
+
+def _dump(obj: Any, path: Path) -> Path:
+    from ..core.gfrf_analysis import json_safe
+
+    path.write_text(json.dumps(json_safe(obj), indent=2, allow_nan=False) + "\n")
+    return path
+
+
+def _prepare(out_dir: str | Path) -> Path:
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise DataError(f"--out {out}: exists and is not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DataError(f"--out {out}: cannot create ({exc.strerror})") from exc
+    return out
+
+
+def _finish(sink: Sink, title: str, sections: list[Section], kind: str,
+            subtitle: str = "", extra: tuple[Path, ...] = ()) -> ReportResult:
+    index = write_page(sink.out_dir, title, sections, subtitle)
+    sink.tick()
+    sink.close()
+    return ReportResult(index=index, kind=kind, figures=tuple(sink.files), data=dict(sink.data),
+                        notes=tuple(sink.notes), extra_files=extra)
+
+
+def report_bag(bag: str | Path, out_dir: str | Path,
+               options: ReportOptions | None = None) -> ReportResult:
+    """Identify a recording (``options``), then report everything (module docstring)."""
+    from ..bagio import read_recording
+    from ..core.identify import identify_recording
+
+    opt = options or ReportOptions()
+    out = _prepare(out_dir)
+    sink = Sink(out, 4 + SERIES_FIGURES + FREQ_FIGURES)
+    try:
+        rec = read_recording(bag).recording
+        sink.tick()
+        res = identify_recording(rec, input=opt.input, output=opt.output, config=opt.config,
+                                 estimate=opt.estimate, validate=opt.validate,
+                                 max_lag_corr=opt.corr_lags)
+        sink.tick()
+        d = res.to_dict()
+        d["source"] = str(Path(bag).resolve())
+        files = (_dump(d, out / "identify.json"),)
+        return _identify(d, rec, sink, files, f"recording {Path(bag).name}")
+    finally:
+        sink.close()
+
+
+def _identify(d: dict[str, Any], rec: Any, sink: Sink, files: tuple[Path, ...],
+              what: str, why: str = "") -> ReportResult:
+    from ..core.gfrf_analysis import analyse_json
+    from ..core.model import NarxModel
+    from . import frequency, identify
+
+    model = NarxModel.from_dict(d)
+    if rec is not None and d.get("estimate"):
+        signals, validation = identify.series_sections(d, model, rec, sink)
+        sections = [signals, identify.model_section(d), validation]
+    else:
+        sections = [identify.model_section(d),
+                    *identify.json_only_sections(d, why or "no recording")]
+    try:
+        g = analyse_json(d).to_dict()
+    except SysIdError as exc:
+        sink.notes.append(f"GFRFs not computed: {exc}")
+        sections.append(Section("Frequency domain", (Facts((("GFRFs", str(exc)),)),)))
+    else:
+        sink.tick()
+        files = (*files, _dump(g, sink.out_dir / "gfrf.json"))
+        sections += frequency.model_sections(model, g, sink, d)
+    return _finish(sink, f"pmsm-sysid report: {what}", sections, "identify",
+                   f"{d.get('input')} → {d.get('output')}, {len(d['terms'])} terms",
+                   extra=files)
+
+
+def _source(d: Mapping[str, Any], json_path: Path) -> tuple[Path | None, str]:
+    """The recording an identify JSON names, tried as given and beside the JSON."""
+    src = d.get("source")
+    if not src:
+        return None, ("the identify JSON names no recording ('source'); report the bag "
+                      "itself to draw them")
+    p = Path(str(src))
+    for cand in (p, json_path.parent / p) if not p.is_absolute() else (p,):
+        if cand.is_dir() or cand.is_file():
+            return cand, ""
+    return None, f"the recording {src} named by the identify JSON is not there"
+
+
+def report_identify(d: dict[str, Any], json_path: Path, out_dir: str | Path) -> ReportResult:
+    """An identify JSON: model and GFRF figures, time-domain ones from its recording."""
+    from ..bagio import read_recording
+
+    out = _prepare(out_dir)
+    sink = Sink(out, 3 + SERIES_FIGURES + FREQ_FIGURES)
+    try:
+        path, why = _source(d, json_path)
+        rec = None
+        if path is not None:
+            rec = read_recording(path).recording
+        sink.tick()
+        return _identify(d, rec, sink, (), json_path.name, why)
+    finally:
+        sink.close()
+
+
+def report_gfrf(g: Mapping[str, Any], json_path: Path, out_dir: str | Path) -> ReportResult:
+    from . import frequency
+
+    sink = Sink(_prepare(out_dir), 1 + 3)
+    try:
+        sections = frequency.json_sections(g, sink)
+        return _finish(sink, f"pmsm-sysid report: {json_path.name}", sections, "gfrf")
+    finally:
+        sink.close()
+
+
+def report_diagnose(d: Mapping[str, Any], json_path: Path, out_dir: str | Path) -> ReportResult:
+    from . import diagnose
+
+    sink = Sink(_prepare(out_dir), 1)
+    try:
+        sections = diagnose.json_sections(d)
+        return _finish(sink, f"pmsm-sysid report: {json_path.name}", sections, "diagnose")
+    finally:
+        sink.close()
+
+
+def kind_of(d: Any) -> str:
+    """Which result a JSON holds: identify, run, gfrf or diagnose (DataError otherwise)."""
+    if isinstance(d, dict):
+        if "terms" in d:
+            return "identify"
+        if isinstance(d.get("last_model"), dict):
+            return "run"
+        if "h1" in d and "h2" in d:
+            return "gfrf"
+        if "effects" in d and "fit" in d:
+            return "diagnose"
+    raise DataError("not a result JSON of identify, gfrf, diagnose or run --json")
+
+
+def report_json(path: str | Path, out_dir: str | Path) -> ReportResult:
+    """Report a result JSON (kind detected from its keys)."""
+    p = Path(path)
+    try:
+        d = json.loads(p.read_text())
+    except FileNotFoundError as exc:
+        raise DataError(f"{p}: no such file") from exc
+    except (OSError, ValueError) as exc:
+        raise DataError(f"{p}: not readable JSON ({exc})") from exc
+    try:
+        kind = kind_of(d)
+    except DataError as exc:
+        raise DataError(f"{p}: {exc}") from exc
+    if kind == "gfrf":
+        return report_gfrf(d, p, out_dir)
+    if kind == "diagnose":
+        return report_diagnose(d, p, out_dir)
+    if kind == "run":
+        d = dict(d["last_model"])
+        d.pop("source", None)
+    return report_identify(d, p, out_dir)
+
+
+def build_report(source: str | Path, out_dir: str | Path,
+                 options: ReportOptions | None = None) -> ReportResult:
+    """A recording directory (or .mcap/.db3 file) or a result JSON to ``out_dir``."""
+    p = Path(source)
+    if not p.exists():
+        raise DataError(f"{p}: no such file or directory")
+    if p.is_file() and p.suffix.lower() == ".json":
+        return report_json(p, out_dir)
+    return report_bag(p, out_dir, options)
