@@ -28,7 +28,14 @@ from ..errors import DiagnoseError, PlantError, SysIdError
 from ..plant import Plant
 from ..signals import Recording, check_finite
 from .estimate import Fit, contributions, design, refine
-from .kinematics import EquationData, FilterSpec, choose_filter, equation_data
+from .kinematics import (
+    FEEDBACK_Z,
+    EquationData,
+    FilterSpec,
+    choose_filter,
+    equation_data,
+    feedback_z,
+)
 from .library import Effect
 from .modelling import Alternative, Model, confirmed_model
 from .result import Curves, DiagnoseResult, FoundEffect, capped
@@ -38,6 +45,8 @@ from .stats import ar_whitener, lstsq, whiten
 from .translate import corrected_plant, effect_params
 
 SPLIT = 0.7
+_CLOSED_NOTE = ("the thrust responds to sensor noise (closed loop): thrust_lag and "
+                "transport_delay were not searched -- the thrust's own noise would fake them")
 # which look-alike comparison (modelling.build_model) an effect's name belongs to
 _LOOKALIKE = {"thrust_lag": "thrust_lag", "transport_delay": "thrust_lag",
               "stribeck_friction": "stribeck_friction", "coulomb_friction": "stribeck_friction"}
@@ -83,7 +92,7 @@ def segments(plant: Plant, real: Recording, validate: Recording | None,
         recs = {"estimation": real.window(0, cut), "validation": real.window(cut, len(real))}
     else:
         recs = {"estimation": real, "validation": validate}
-    spec = choose_filter(recs["estimation"].thrust, recs["estimation"].sample_rate_hz)
+    spec = choose_filter(recs["estimation"].speed, recs["estimation"].sample_rate_hz)
     vspec = spec if recs["validation"].sample_rate_hz == recs["estimation"].sample_rate_hz \
         else _filter_for(spec, recs["validation"].sample_rate_hz)
     est = equation_data(plant, recs["estimation"], spec)
@@ -194,7 +203,9 @@ def diagnose(plant: Plant, real: Recording, validate: Recording | None = None,
 def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
               opts: DiagnoseOptions) -> DiagnoseResult:
     segs = segments(plant, real, validate, opts.split)
-    cands = Candidates.build(segs.est)
+    fb = feedback_z(segs.recs["estimation"])
+    closed = fb > FEEDBACK_Z
+    cands = Candidates.build(segs.est, exclude=("thrust_lag",) if closed else ())
     n_tests = sum(f.n_independent for f in cands.families)
     ranking = score_step(segs.est, cands, [], opts.alpha, opts.min_share)
     steps, _ = forward_select(segs.est, cands, opts.alpha, opts.min_share, opts.max_effects)
@@ -211,6 +222,9 @@ def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
     notes += [f"{e.label()} was significant on the estimation data but not confirmed on "
               "held-out data; it is not reported" for e in dropped]
     method = _method(segs, opts, n_tests, validate is not None)
+    method["feedback"] = {"z": fb, "closed_loop": closed}
+    if closed:
+        notes.append(_CLOSED_NOTE)
     return DiagnoseResult(
         plant=plant, corrected=corrected, effects=tuple(found),
         where=tuple(where_table(segs.est, ranking)), nrmse_before=table["estimation"]

@@ -16,9 +16,12 @@ reason for the care below (the IDIM-LS practice of the EMPS benchmark):
   ``L r = Σ θ_i L φ_i`` holds exactly whatever the cut-off: filtering trades noise for
   bandwidth but adds no bias. Nonlinear regressors are evaluated on the smoothed states.
 * **Cut-off from the data's bandwidth.** ``fc = 4 · f99`` where f99 is the frequency below
-  which 99 % of the power of the (mean-removed) thrust lies, clipped to [0.02, 0.2]·fs. The
-  motion and the effects it drives live at the thrust's frequencies and their low harmonics;
-  above a few times f99 the residual is differentiated measurement noise, which grows as f².
+  which 99 % of the power of the (mean-removed) speed lies, clipped to [0.05, 0.2]·fs. The
+  motion lives below f99 and the effects it drives at its low harmonics; above a few times
+  f99 the residual is differentiated measurement noise, which grows as f². The speed, not
+  the thrust, sets the band: under feedback the thrust carries the controller's response
+  to sensor noise at all frequencies, and a cut-off that lets it in lets in the noise of
+  the acceleration too -- which then biases the mass (errors in variables) and fakes lags.
 * **Decimation.** After L, every D-th sample is kept, D = floor(fs / (2.5 fc)), and
   ``ceil(3 fs / fc)`` samples are dropped at each end (filter start-up).
 """
@@ -57,25 +60,51 @@ class FilterSpec:
     order: int = FILTER_ORDER
 
     def to_dict(self) -> dict[str, float | int | str]:
-        return {"cutoff_hz": self.cutoff_hz, "thrust_band_hz": self.band_hz,
+        return {"cutoff_hz": self.cutoff_hz, "speed_band_hz": self.band_hz,
                 "decimation": self.decimation, "edge_samples": self.edge,
                 "order": self.order, "kind": "butterworth zero-phase (sosfiltfilt)"}
 
 
-def choose_filter(thrust: FloatArray, fs: float) -> FilterSpec:
-    """Cut-off from the thrust's 99 % power bandwidth (module doc)."""
-    u = np.asarray(thrust, dtype=np.float64) - float(np.mean(thrust))
+def choose_filter(speed: FloatArray, fs: float) -> FilterSpec:
+    """Cut-off from the speed's 99 % power bandwidth (module doc)."""
+    u = np.asarray(speed, dtype=np.float64) - float(np.mean(speed))
     power = np.abs(np.fft.rfft(u)) ** 2
     freqs = np.fft.rfftfreq(len(u), 1.0 / fs)
     total = float(power.sum())
     if total <= 0.0:
-        raise DiagnoseError("the thrust is constant: nothing excites the plant")
+        raise DiagnoseError("the axis does not move: nothing to compare the plant with")
     cum = np.cumsum(power) / total
     band = float(freqs[int(np.searchsorted(cum, POWER_FRACTION))])
-    fc = min(max(CUTOFF_FACTOR * band, 0.02 * fs), 0.2 * fs)
+    fc = min(max(CUTOFF_FACTOR * band, 0.05 * fs), 0.2 * fs)
     decim = max(1, math.floor(fs / (2.5 * fc)))
     edge = math.ceil(3.0 * fs / fc)
     return FilterSpec(cutoff_hz=fc, band_hz=band, decimation=decim, edge=edge)
+
+
+FEEDBACK_Z = 5.0
+
+
+def feedback_z(rec: Recording) -> float:
+    """Evidence that the thrust is a feedback of the measurements (a z-score).
+
+    Above 0.3 fs a servo's motion has no power, so the measured speed and position there
+    are sensor noise. Open loop, the thrust is independent of that noise; under feedback
+    it responds to it at once (a D-term to the speed noise, a P-term to the position
+    noise). The largest |correlation|·sqrt(N) of the high-passed thrust with the
+    high-passed speed or position is returned; above ``FEEDBACK_Z`` the recording is
+    treated as closed loop.
+    """
+    fs = rec.sample_rate_hz
+    hp = butter(4, 0.3 * fs, btype="highpass", fs=fs, output="sos")
+    f = sosfiltfilt(hp, rec.thrust)[20:-20]
+    best = 0.0
+    for sig in (rec.speed, rec.position):
+        z = sosfiltfilt(hp, sig)[20:-20]
+        den = float(np.std(f) * np.std(z))
+        if den > 0:
+            rho = float(np.mean((f - f.mean()) * (z - z.mean()))) / den
+            best = max(best, abs(rho) * math.sqrt(len(f)))
+    return best
 
 
 def interval_force(cmd: FloatArray, period: float, tau: float = 0.0,
@@ -278,7 +307,7 @@ def equation_data(plant: Plant, rec: Recording, filt: FilterSpec | None = None,
     mode = mode or ("position" if rec.speed_derived else "speed")
     if mode not in ("speed", "position"):
         raise DiagnoseError(f"unknown equation mode '{mode}'")
-    spec = filt or choose_filter(rec.thrust, fs)
+    spec = filt or choose_filter(rec.speed, fs)
     if len(rec) < max(MIN_SAMPLES, 4 * spec.edge):
         raise DiagnoseError(f"{len(rec)} samples are too few for the equation error "
                             f"(need {max(MIN_SAMPLES, 4 * spec.edge)} at {fs:g} Hz)")
