@@ -1,0 +1,161 @@
+"""Figures of a sim-to-real diagnosis (``pmsm-sysid diagnose --report DIR``).
+
+=======================  ====================================================================
+function                 shows
+=======================  ====================================================================
+``residual_time``        force residual of the nominal and of the corrected plant over time
+``residual_vs_axis``     partial residual over position or velocity, each named effect's
+                         fitted curve drawn over it
+``speed_replay``         measured speed and the short-horizon replays before/after
+``fit_bars``             NRMSE before/after, estimation and held-out, force and speed
+=======================  ====================================================================
+
+Each returns a :class:`~.base.Plot` whose ``data`` holds what was drawn, read back from the
+artists. ``write_report`` saves them and writes ``index.html`` with the report tables.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..core.discrepancy.result import DiagnoseResult
+from .base import Plot, new_figure, styled
+
+POSITION_EFFECTS = ("cogging", "thrust_ripple", "spring")
+VELOCITY_EFFECTS = ("coulomb_friction", "stribeck_friction", "viscous_error", "force_offset")
+
+
+@styled
+def residual_time(result: DiagnoseResult) -> Plot:
+    """Residual before (grey) and after (black) over time; one panel per data segment."""
+    c = result.curves
+    segs = [s for s in ("estimation", "validation") if s in c.t]
+    fig = new_figure(8.0, 2.4 * max(1, len(segs)))
+    axes = np.atleast_1d(fig.subplots(len(segs), 1, squeeze=False)[:, 0])
+    data: dict[str, Any] = {}
+    for ax, seg in zip(axes, segs, strict=True):
+        (b,) = ax.plot(c.t[seg], c.before[seg], color="0.6", label="nominal plant")
+        (a,) = ax.plot(c.t[seg], c.after[seg], color="k", label="corrected")
+        ax.set_ylabel("force residual (N)")
+        ax.set_title(f"{seg} data")
+        ax.legend(loc="upper right")
+        data[seg] = {"t": np.asarray(b.get_xdata()), "before": np.asarray(b.get_ydata()),
+                     "after": np.asarray(a.get_ydata())}
+    axes[-1].set_xlabel("time (s)")
+    return Plot(fig, "diagnose_residual_time",
+                "Equation-error force residual (parallel-filtered) of the nominal plant and "
+                "of the corrected plant.", data)
+
+
+@styled
+def residual_vs_axis(result: DiagnoseResult, axis: str, segment: str = "estimation") -> Plot:
+    """Partial residual over ``position`` or ``velocity`` with the named effects' curves.
+
+    The partial residual is what is left after the model plus the effects of this axis: the
+    points scatter around the drawn curve when the named effect has the right shape.
+    """
+    c = result.curves
+    names = POSITION_EFFECTS if axis == "position" else VELOCITY_EFFECTS
+    arg = c.x[segment] if axis == "position" else c.v[segment]
+    parts = [(n, p) for n, p in c.parts.get(segment, []) if n in names]
+    effect = np.sum([p for _, p in parts], axis=0) if parts else np.zeros_like(arg)
+    partial = c.after[segment] + effect
+    order = np.argsort(arg)
+    fig = new_figure(8.0, 3.2)
+    ax = fig.subplots()
+    (pts,) = ax.plot(arg * (1e3 if axis == "position" else 1.0), partial, ".", color="0.5",
+                     markersize=2, label="residual + these effects")
+    data: dict[str, Any] = {"arg": np.asarray(pts.get_xdata()),
+                            "partial": np.asarray(pts.get_ydata()), "curves": {}}
+    if parts:
+        label = " + ".join(n for n, _ in parts)
+        (line,) = ax.plot(arg[order] * (1e3 if axis == "position" else 1.0), effect[order],
+                          color="tab:red", label=f"fitted: {label}")
+        data["curves"][label] = np.asarray(line.get_ydata())
+    ax.set_xlabel("position (mm)" if axis == "position" else "speed (m/s)")
+    ax.set_ylabel("force (N)")
+    ax.set_title(f"residual over {axis} ({segment} data)")
+    ax.legend(loc="upper right")
+    return Plot(fig, f"diagnose_residual_vs_{axis}",
+                f"Residual over {axis} after every other effect, with the fitted curve of "
+                f"the named {axis} effects ({', '.join(n for n, _ in parts) or 'none'}).",
+                data)
+
+
+@styled
+def speed_replay(result: DiagnoseResult, segment: str = "validation",
+                 seconds: float = 1.0) -> Plot:
+    """Measured speed and the replays of the nominal and corrected plants (first seconds)."""
+    r = result.curves.replay.get(segment)
+    fig = new_figure(8.0, 3.0)
+    ax = fig.subplots()
+    data: dict[str, Any] = {}
+    if r is not None:
+        t = r["t"] - r["t"][0]
+        keep = t <= seconds
+        for key, style in (("measured", "0.6"), ("before", "tab:blue"), ("after", "k")):
+            (line,) = ax.plot(t[keep], r[key][keep], color=style, label=key)
+            data[key] = np.asarray(line.get_ydata())
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("speed (m/s)")
+    ax.set_title(f"speed replay from the measured state ({segment} data)")
+    ax.legend(loc="upper right")
+    return Plot(fig, "diagnose_speed_replay",
+                "Recorded thrust replayed through the nominal (before) and corrected (after) "
+                "plants, restarted from the measured state every horizon.", data)
+
+
+@styled
+def fit_bars(result: DiagnoseResult) -> Plot:
+    """NRMSE before/after for force and speed, estimation and held-out data."""
+    labels, before, after = [], [], []
+    for seg in ("estimation", "validation"):
+        f = result.fit.get(seg) or {}
+        rows = [("force", f)]
+        if f.get("output_error"):
+            rows.append(("speed", f["output_error"]))
+        for kind, row in rows:
+            labels.append(f"{kind}\n{seg}")
+            before.append(float(row["nrmse_before"]))
+            after.append(float(row["nrmse_after"]))
+    fig = new_figure(6.0, 3.0)
+    ax = fig.subplots()
+    x = np.arange(len(labels))
+    b = ax.bar(x - 0.2, before, 0.4, color="0.6", label="nominal plant")
+    a = ax.bar(x + 0.2, after, 0.4, color="k", label="corrected")
+    ax.set_xticks(x, labels)
+    ax.set_ylabel("NRMSE")
+    ax.legend()
+    return Plot(fig, "diagnose_fit", "NRMSE before and after the named effects.",
+                {"labels": labels, "before": [float(r.get_height()) for r in b],
+                 "after": [float(r.get_height()) for r in a]})
+
+
+def figures(result: DiagnoseResult) -> list[Plot]:
+    """Every figure of the diagnosis, in page order."""
+    out = [fit_bars(result), residual_time(result),
+           residual_vs_axis(result, "position"), residual_vs_axis(result, "velocity")]
+    if result.curves.replay:
+        out.append(speed_replay(result))
+    return out
+
+
+def write_report(result: DiagnoseResult, out_dir: str | Path, title: str = "") -> Path:
+    """Save the figures as PNG in ``out_dir`` and write ``out_dir/index.html``."""
+    from ..report import diagnose as sections
+    from ..report.html import Section, image, write_page
+    from .base import save
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    images = []
+    for plot in figures(result):
+        images.append(image(save(plot, out), plot.caption))
+        plot.figure.clear()
+    pages = sections.json_sections(result.to_dict())
+    pages.insert(2, Section("Sim-to-real: figures", tuple(images)))
+    return write_page(out, f"pmsm-sysid diagnose: {title}" if title else "pmsm-sysid diagnose",
+                      pages)
