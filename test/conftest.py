@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import os
 from collections.abc import Iterator
@@ -22,9 +23,19 @@ def _worker_index() -> int:
     return int(wid[2:]) if wid.startswith("gw") and wid[2:].isdigit() else 0
 
 
+def _session_offset() -> int:
+    """Offset shared by the workers of one pytest run (xdist's run uid, else the pid), so
+    that test runs started side by side on one host mostly use different domains."""
+    uid = os.environ.get("PYTEST_XDIST_TESTRUNUID") or str(os.getpid())
+    return int(hashlib.sha1(uid.encode()).hexdigest(), 16) % 130
+
+
+_OFFSET = _session_offset()
+
+
 def next_domain_id() -> int:
     """A ROS_DOMAIN_ID unique to this xdist worker and test (<= 232)."""
-    return 100 + (_worker_index() * 40 + next(_counter) % 40) % 130
+    return 100 + (_OFFSET + _worker_index() * 40 + next(_counter) % 40) % 130
 
 
 @pytest.fixture

@@ -98,6 +98,8 @@ def test_render_topics_has_one_line_per_topic() -> None:
 @pytest.mark.ros
 def test_monitor_node_counts_a_live_stream(ros_context: object) -> None:
     """A publisher with a deliberate 3-sample hole: the node reports count, value and gap."""
+    import uuid
+
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import String
 
@@ -105,11 +107,12 @@ def test_monitor_node_counts_a_live_stream(ros_context: object) -> None:
     from pmsm_sysid.rosutil import data_qos, make_sample_messages, message_class
     from pmsm_sysid.topics import MODEL_TOPIC, SPEED_TYPE
 
-    mon = MonitorNode(context=ros_context)  # type: ignore[arg-type]
+    ns = f"/t{uuid.uuid4().hex[:10]}"  # a namespace of its own: no cross-talk between runs
+    mon = MonitorNode(context=ros_context, namespace=ns)  # type: ignore[arg-type]
     from rclpy.node import Node
 
     pub_node = Node("pub", context=ros_context)  # type: ignore[arg-type]
-    pub = pub_node.create_publisher(message_class(SPEED_TYPE), "/pmsm/speed", data_qos())
+    pub = pub_node.create_publisher(message_class(SPEED_TYPE), f"{ns}/speed", data_qos())
     model_pub = pub_node.create_publisher(String, MODEL_TOPIC, 10)
     ex = SingleThreadedExecutor(context=ros_context)  # type: ignore[arg-type]
     ex.add_node(mon)
@@ -124,12 +127,12 @@ def test_monitor_node_counts_a_live_stream(ros_context: object) -> None:
             pub.publish(make_sample_messages(k * 2_000_000, 0.0, 0.01 * k, 0.0)["speed"])
         model_pub.publish(String(data=json.dumps({"output": "speed", "terms": [
             {"name": "y(k-1)", "estimate": 0.5}]})))
-        stats = mon.stats["/pmsm/speed"]
+        stats = mon.stats[f"{ns}/speed"]
         while stats.count < len(ks) or mon.view.model is None:
             assert time.monotonic() < deadline, f"received {stats.count} of {len(ks)}"
             ex.spin_once(timeout_sec=0.05)
         snap = mon.snapshot()
-        speed = next(t for t in snap["topics"] if t["topic"] == "/pmsm/speed")
+        speed = next(t for t in snap["topics"] if t["topic"] == f"{ns}/speed")
         assert speed["count"] == 57 and speed["gaps"] == 1 and speed["missing"] == 3
         assert speed["last_value"] == pytest.approx(0.59)
         assert speed["stamp_rate_hz"] == pytest.approx(500.0)
@@ -145,11 +148,13 @@ def test_monitor_cli_once_writes_json(ros_env: int, tmp_path: Path) -> None:
     out = tmp_path / "snap.json"
     proc = subprocess.run(
         [sys.executable, "-m", "pmsm_sysid.cli", "monitor", "--once", "--duration", "0.5",
-         "--json", str(out)], capture_output=True, text=True, timeout=60)
+         "--namespace", "/quiet", "--json", str(out)], capture_output=True, text=True,
+        timeout=60)
     assert proc.returncode == 0, proc.stderr
     snap = json.loads(out.read_text())
-    assert [t["count"] for t in snap["topics"]] == [0] * 8
-    assert "/pmsm/thrust" in proc.stdout
+    assert len(snap["topics"]) == 8 and snap["namespace"] == "/quiet"
+    assert [t["count"] for t in snap["topics"][:3]] == [0] * 3
+    assert "/quiet/thrust" in proc.stdout and "model: (none yet)" in proc.stdout
 
 
 def test_monitor_cli_bad_interval_is_one_line(ros_env: int) -> None:

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +22,11 @@ from pmsm_sysid.core.plant import load_plant
 REPO = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "pmsm_sysid.cli"]
 NS = 1_000_000_000
+
+
+def _unique_ns() -> str:
+    """A namespace of its own, so test runs side by side on one host cannot cross-talk."""
+    return f"/t{uuid.uuid4().hex[:10]}"
 
 
 def _make_bag(path: Path, n: int, seed: int = 5, storage: str = "mcap") -> Any:
@@ -66,7 +72,8 @@ def _run_in_process(ctx: Any, bag: Path, out: Path, expected: int, **replay: Any
 
     ex = SingleThreadedExecutor(context=ctx)
     with BagRecorder(out) as recorder:
-        rec_node = RecorderNode(recorder, context=ctx, namespace=replay.pop("record_ns", "/pmsm"))
+        rec_node = RecorderNode(recorder, context=ctx, namespace=replay["namespace"],
+                                topics=replay.pop("record_topics", None))
         rep_node = ReplayerNode(bag, context=ctx, settle_s=0.0, linger_s=0.1, **replay)
         ex.add_node(rec_node)
         ex.add_node(rep_node)
@@ -86,15 +93,18 @@ def _run_in_process(ctx: Any, bag: Path, out: Path, expected: int, **replay: Any
 def test_round_trip_in_process_is_bit_for_bit(ros_context: Any, tmp_path: Path) -> None:
     from pmsm_sysid.bagio import read_recording
 
-    n = 1500
+    n, ns = 1500, _unique_ns()
     rec = _make_bag(tmp_path / "sim", n)
-    rep = _run_in_process(ros_context, tmp_path / "sim", tmp_path / "rec", 3 * n, rate=0.0)
+    topics = [f"{ns}/{s}" for s in ("position", "speed", "thrust")]
+    rep = _run_in_process(ros_context, tmp_path / "sim", tmp_path / "rec", 3 * n, rate=0.0,
+                          namespace=ns, record_topics=topics)
     assert rep.stats.matched and rep.stats.passes == 1
     original, recorded = _raw(tmp_path / "sim"), _raw(tmp_path / "rec")
-    assert sorted(recorded) == ["/pmsm/position", "/pmsm/speed", "/pmsm/thrust"]
+    assert sorted(recorded) == topics
     for topic, msgs in original.items():
-        assert len(recorded[topic]) == n == len(msgs)
-        assert recorded[topic] == msgs, topic          # every CDR byte, in order
+        got = recorded[topic.replace("/pmsm", ns)]
+        assert len(got) == n == len(msgs)
+        assert got == msgs, topic          # every CDR byte, in order
     back = read_recording(tmp_path / "rec").recording
     assert np.array_equal(back.t, rec.t) and np.array_equal(back.speed, rec.speed)
     assert np.array_equal(back.thrust, rec.thrust)
@@ -105,18 +115,18 @@ def test_round_trip_in_process_is_bit_for_bit(ros_context: Any, tmp_path: Path) 
 def test_loop_shifts_stamps_and_paced_replay_keeps_schedule(ros_context: Any,
                                                             tmp_path: Path) -> None:
     """Two passes at 4x under a new namespace: stamps keep increasing by exactly one period."""
-    n, rate = 200, 4.0
+    n, rate, ns = 200, 4.0, _unique_ns()
     _make_bag(tmp_path / "sim", n, storage="sqlite3")
     start = time.monotonic()
     rep = _run_in_process(ros_context, tmp_path / "sim", tmp_path / "rec", 2 * 3 * n,
-                          rate=rate, loops=2, namespace="/axis2", record_ns="/axis2")
+                          rate=rate, loops=2, namespace=ns)
     elapsed = time.monotonic() - start
     assert rep.stats.passes == 2
     # paced: the second pass cannot start before (2n - 1) periods / rate of playback
     assert elapsed >= (2 * n - 1) * 0.002 / rate
     assert rep.offset_ns == n * 2_000_000   # span (n-1) periods + one period
     orig_stamps, orig = _stamps_values(tmp_path / "sim", "/pmsm/speed")
-    stamps, msgs = _stamps_values(tmp_path / "rec", "/axis2/speed")
+    stamps, msgs = _stamps_values(tmp_path / "rec", f"{ns}/speed")
     assert len(stamps) == 2 * n
     assert np.all(np.diff(stamps) == 2_000_000)      # strictly increasing, no seam
     assert stamps[:n] == orig_stamps
@@ -150,16 +160,19 @@ def _env(domain: int, tmp: Path) -> dict[str, str]:
 @pytest.mark.slow
 def test_cli_replay_to_record_and_sigterm_finalises(ros_env: int, tmp_path: Path) -> None:
     """Two processes: `record` (stopped by SIGTERM) and `replay --fast` of a simulated bag."""
-    n = 2000
+    n, ns = 2000, _unique_ns()
     _make_bag(tmp_path / "sim", n)
     env = _env(ros_env, tmp_path)
-    recorder = subprocess.Popen([*CLI, "record", "--out", str(tmp_path / "rec")], env=env,
+    topics = [f"{ns}/{s}" for s in ("position", "speed", "thrust")]
+    recorder = subprocess.Popen([*CLI, "record", "--out", str(tmp_path / "rec"),
+                                 "--topics", *topics], env=env,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert recorder.stdout is not None
         first = recorder.stdout.readline()      # printed once the subscriptions exist
-        assert first.startswith("recording /pmsm/position"), first
-        replay = subprocess.run([*CLI, "replay", str(tmp_path / "sim"), "--fast", "--json", "-"],
+        assert first.startswith(f"recording {', '.join(topics)} into"), first
+        replay = subprocess.run([*CLI, "replay", str(tmp_path / "sim"), "--fast",
+                                 "--namespace", ns, "--json", "-"],
                                 env=env, capture_output=True, text=True, timeout=120)
         assert replay.returncode == 0, replay.stderr
         sent = json.loads(replay.stdout)
@@ -172,8 +185,9 @@ def test_cli_replay_to_record_and_sigterm_finalises(ros_env: int, tmp_path: Path
     assert recorder.returncode == 0, err
     assert f"recorded {tmp_path / 'rec'}: {3 * n} messages" in out
     original, recorded = _raw(tmp_path / "sim"), _raw(tmp_path / "rec")   # plain AnyReader
-    assert {t: len(m) for t, m in recorded.items()} == {t: n for t in original}
-    assert recorded == original
+    moved = {t.replace("/pmsm", ns): msgs for t, msgs in original.items()}
+    assert {t: len(m) for t, m in recorded.items()} == {t: n for t in moved}
+    assert recorded == moved
 
 
 def test_cli_errors_are_one_line(ros_env: int, tmp_path: Path) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+import uuid
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -22,10 +23,19 @@ NOISY = REPO / "plants" / "nominal_noisy.yaml"
 COGGING = REPO / "plants" / "cogging.yaml"
 
 
-class Collector:
-    """A node subscribing to the three topics (and /clock) with the data QoS."""
+def _unique_ns() -> str:
+    """A namespace of its own, so test runs side by side on one host cannot cross-talk."""
+    return f"/t{uuid.uuid4().hex[:10]}"
 
-    def __init__(self, context: Any, namespace: str = "/pmsm") -> None:
+
+def _remap_clock(ns: str) -> list[str]:
+    return ["--ros-args", "-r", f"/clock:={ns}/clock"]
+
+
+class Collector:
+    """A node subscribing to the three topics (and <ns>/clock) with the data QoS."""
+
+    def __init__(self, context: Any, namespace: str) -> None:
         from rclpy.node import Node
         from rosgraph_msgs.msg import Clock
 
@@ -40,7 +50,7 @@ class Collector:
                 self.data[sig].append((stamp_to_ns(msg.header.stamp), sample_value(sig, msg)))
             self.node.create_subscription(message_class(type_name), input_topic(namespace, sig),
                                           cb, data_qos())
-        self.node.create_subscription(Clock, "/clock",
+        self.node.create_subscription(Clock, f"{namespace}/clock",
                                       lambda m: self.clock.append(stamp_to_ns(m.clock)),
                                       data_qos())
 
@@ -70,11 +80,13 @@ def test_sim_clock_samples_equal_offline_simulation(ros_context: Any) -> None:
     from pmsm_sysid.nodes.sim_node import MotorSimNode
 
     plant, seed, n = load_plant(NOISY), 7, 2000
-    col = Collector(ros_context)
+    ns = _unique_ns()
+    col = Collector(ros_context, ns)
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(col.node)
     sim = MotorSimNode(context=ros_context, plant=plant, excitation="multisine", seed=seed,
-                       clock="sim", rate=0.0, max_samples=n)
+                       clock="sim", rate=0.0, max_samples=n, namespace=ns,
+                       cli_args=_remap_clock(ns))
     try:
         _wait_matched(ex, sim)  # the subscriber is matched before the first sample
         ex.add_node(sim)
@@ -106,11 +118,13 @@ def test_wall_clock_stamps_are_regular_and_current(ros_context: Any) -> None:
 
     from pmsm_sysid.nodes.sim_node import MotorSimNode
 
-    col = Collector(ros_context)
+    ns = _unique_ns()
+    col = Collector(ros_context, ns)
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(col.node)
     before = time.time_ns()
-    sim = MotorSimNode(context=ros_context, max_samples=100)
+    sim = MotorSimNode(context=ros_context, max_samples=100, namespace=ns,
+                       cli_args=_remap_clock(ns))
     try:
         _wait_matched(ex, sim)
         ex.add_node(sim)
@@ -144,10 +158,12 @@ def test_cogging_switched_on_at_run_time(ros_context: Any) -> None:
 
     plant, seed, k_on = nominal_plant(), 3, 500
     amp, pitch, phase = 4.0, 0.05, 0.3
-    col = Collector(ros_context)
+    ns = _unique_ns()
+    col = Collector(ros_context, ns)
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(col.node)
-    sim = MotorSimNode(context=ros_context, plant=plant, seed=seed, clock="sim", rate=0.0)
+    sim = MotorSimNode(context=ros_context, plant=plant, seed=seed, clock="sim", rate=0.0,
+                       namespace=ns, cli_args=_remap_clock(ns))
     sim._timer.cancel()  # stepped by hand below
     try:
         _wait_matched(ex, sim)

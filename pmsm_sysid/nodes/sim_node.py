@@ -164,8 +164,9 @@ class MotorSimNode(Node):
                  max_samples: int = 0, frame_id: str = "pmsm",
                  excitation_options: Mapping[str, Any] | None = None,
                  node_name: str = "pmsm_sim",
-                 parameter_overrides: list[Parameter] | None = None) -> None:
-        super().__init__(node_name, context=context,
+                 parameter_overrides: list[Parameter] | None = None,
+                 cli_args: list[str] | None = None) -> None:
+        super().__init__(node_name, context=context, cli_args=cli_args,
                          parameter_overrides=parameter_overrides or [])
         try:
             self._wire(plant, excitation, seed, amplitude_n, namespace, clock, rate, burst,
