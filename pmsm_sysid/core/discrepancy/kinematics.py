@@ -33,13 +33,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import butter, lfilter, sosfiltfilt
-from scipy.special import erf
+from scipy.signal import butter, sosfiltfilt
 
 from ..errors import DiagnoseError
-from ..physics import effects_force
 from ..plant import SIGN_SMOOTHING_MPS, Plant
 from ..signals import Recording
+from .averaging import interval_effects, interval_force, sign_width
 
 FloatArray = NDArray[np.float64]
 
@@ -107,78 +106,6 @@ def feedback_z(rec: Recording) -> float:
     return best
 
 
-def interval_force(cmd: FloatArray, period: float, tau: float = 0.0,
-                   delay: float = 0.0) -> FloatArray:
-    """Mean force over each sample interval for a ZOH command through a delay and a lag.
-
-    The command ``cmd[k]`` is held over [kT, (k+1)T); the force follows it ``delay`` later
-    through ``tau dF/dt = cmd - F`` (both exact, as in the simulator). Returns the interval
-    means, which is what the velocity increment of interval k integrates. Before the start
-    the command is taken as ``cmd[0]`` (a settled force).
-    """
-    c = np.asarray(cmd, dtype=np.float64)
-    m = math.floor(delay / period + 1e-9)
-    r = delay - m * period
-    r = 0.0 if r <= 1e-9 * period else r
-    pad = np.concatenate([np.full(m + 1, c[0]), c])
-    c2 = pad[1:len(c) + 1]  # command in force after the switch (k - m)
-    c1 = pad[:len(c)]  # command before the switch (k - m - 1)
-    if tau <= 0.0:
-        out: FloatArray = (c1 * r + c2 * (period - r)) / period
-        return out
-    a1, a2 = math.exp(-r / tau), math.exp(-(period - r) / tau)
-    drive = (1.0 - a1) * a2 * c1 + (1.0 - a2) * c2
-    z0 = c[0]
-    z_next = lfilter([1.0], [1.0, -a1 * a2], drive, zi=[a1 * a2 * z0])[0]
-    z = np.concatenate([[z0], z_next[:-1]])  # force at the start of each interval
-    z_mid = c1 + (z - c1) * a1
-    integral = c1 * r + (z - c1) * tau * (1 - a1) + c2 * (period - r) \
-        + (z_mid - c2) * tau * (1 - a2)
-    res: FloatArray = integral / period
-    return res
-
-
-def smooth_sign(v: FloatArray, smoothing: float = SIGN_SMOOTHING_MPS) -> FloatArray:
-    """sign(v) regularised as tanh(v / smoothing), the simulator's convention."""
-    out: FloatArray = np.tanh(np.asarray(v) / smoothing)
-    return out
-
-
-def smooth_abs(v: FloatArray, smoothing: float) -> FloatArray:
-    """smoothing * log cosh(v / smoothing): |v| rounded off, the antiderivative of tanh."""
-    z = np.abs(np.asarray(v, dtype=np.float64)) / smoothing
-    out: FloatArray = smoothing * (z + np.log1p(np.exp(-2.0 * z)) - math.log(2.0))
-    return out
-
-
-def interval_friction(v_lo: FloatArray, v_hi: FloatArray, smoothing: float,
-                      stribeck_mps: float = 0.0) -> FloatArray:
-    """Mean of sign(v) (or of the Stribeck hump exp(-(v/vs)²) sign(v)) over an interval.
-
-    The speed is taken linear between its values at the interval's ends, so the mean is
-    ``(G(v_hi) - G(v_lo)) / (v_hi - v_lo)`` with G the antiderivative: ``smooth_abs`` for
-    Coulomb, ``sqrt(pi)/2 vs erf(smooth_abs/vs)`` for Stribeck. A reversal inside an interval
-    then counts for the fraction of the interval spent on each side, as the simulator's
-    force does, instead of switching at the sample.
-    """
-    def anti(v: FloatArray) -> FloatArray:
-        s = smooth_abs(v, smoothing)
-        if stribeck_mps <= 0:
-            return s
-        out: FloatArray = 0.5 * math.sqrt(math.pi) * stribeck_mps * erf(s / stribeck_mps)
-        return out
-
-    mid = 0.5 * (v_lo + v_hi)
-    point = smooth_sign(mid, smoothing)
-    if stribeck_mps > 0:
-        point = point * np.exp(-((mid / stribeck_mps) ** 2))
-    dv = v_hi - v_lo
-    small = np.abs(dv) < 1e-6 * smoothing
-    safe = np.where(small, 1.0, dv)
-    out: FloatArray = np.where(small, point, (anti(v_hi) - anti(v_lo)) / safe)
-    return out
-
-
 def smoothed_speed_noise(rec: Recording, mode: str, sos: FloatArray) -> float:
     """Standard deviation (m/s) of the measurement noise left in the smoothed speed.
 
@@ -195,16 +122,6 @@ def smoothed_speed_noise(rec: Recording, mode: str, sos: FloatArray) -> float:
     op = 0.5 * (imp[1:] + imp[:-1]) if mode == "speed" else 0.5 * fs * (imp[2:] - imp[:-2])
     gain = float(np.linalg.norm(sosfiltfilt(sos, op)))
     return sigma * gain
-
-
-def sign_smoothing(noise_std: float) -> float:
-    """Width of E[sign(v) | smoothed v]: the simulator's tanh width and the noise combined.
-
-    tanh(x/w) matches erf(x/(sqrt(2) s)) for w = sqrt(pi/2) s = 1.2533 s; widths add in
-    quadrature. Without this, noise makes sign(v) wrong near v = 0 and a spurious
-    low-speed (Stribeck-like) term appears.
-    """
-    return math.hypot(SIGN_SMOOTHING_MPS, math.sqrt(math.pi / 2.0) * noise_std)
 
 
 @dataclass(frozen=True)
@@ -321,16 +238,17 @@ def equation_data(plant: Plant, rec: Recording, filt: FilterSpec | None = None,
     force = ifor[:-1] if mode == "speed" else 0.5 * (ifor[:-2] + ifor[1:-1])
     xs, vs, as_ = (sosfiltfilt(sos, s) for s in (x, v, a))
     v_lo, v_hi = _interval_ends(rec, mode, sos)
-    resid = force - inertial - effects_force(plant, xs, vs, force)
+    noise = smoothed_speed_noise(rec, mode, sos)
+    resid = force - inertial - interval_effects(plant, xs, vs, v_lo, v_hi, force, T, mode,
+                                                noise)
     t = rec.t[:-1] if mode == "speed" else rec.t[1:-1]
     y = np.ascontiguousarray(sosfiltfilt(sos, resid)[spec.edge:len(resid) - spec.edge:
                                                       spec.decimation])
-    noise = smoothed_speed_noise(rec, mode, sos)
     return EquationData(x=xs, v=vs, v_lo=v_lo, v_hi=v_hi, a=as_, v_raw=v, a_raw=a, cmd=cmd,
                         force=force,
                         residual_raw=resid, y=y, t=t, period=T, mode=mode,
                         filt=spec, sos=sos, speed_noise_mps=noise,
-                        sign_smoothing_mps=sign_smoothing(noise))
+                        sign_smoothing_mps=sign_width(noise))
 
 
 def thinned_times(data: EquationData) -> FloatArray:

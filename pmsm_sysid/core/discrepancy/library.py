@@ -33,7 +33,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DiagnoseError
-from .kinematics import EquationData, interval_friction, thinned
+from .averaging import interval_friction, travel_gain
+from .kinematics import EquationData, thinned
 
 FloatArray = NDArray[np.float64]
 
@@ -107,30 +108,17 @@ def raw_columns(e: Effect, data: EquationData) -> FloatArray:
         k = 2.0 * math.pi / e.pitch_m
         cols = []
         for h in e.orders:
-            g = _travel_average(data, h / e.pitch_m)
+            g = travel_gain(data.v, data.period, h / e.pitch_m, data.mode)
             cols += [g * np.sin(h * k * x), g * np.cos(h * k * x)]
         return np.column_stack(cols)
     if e.name == "thrust_ripple":
         k = 2.0 * math.pi / e.pitch_m
-        g = _travel_average(data, 1.0 / e.pitch_m) * data.force
+        g = travel_gain(data.v, data.period, 1.0 / e.pitch_m, data.mode) * data.force
         return np.column_stack([g * np.sin(k * x), g * np.cos(k * x)])
     if e.name == "thrust_lag" and not e.dynamic:
         d = np.diff(data.cmd, prepend=data.cmd[0]) / data.period
         return data.pair(d)[:, None]
     raise DiagnoseError(f"effect '{e.name}' has no linear regressor")
-
-
-def _travel_average(data: EquationData, wavenumber: float) -> FloatArray:
-    """Gain of averaging sin(2π κ x) over the travel of one equation instant.
-
-    The force a position-periodic effect exerts varies within a sample interval as the
-    mover travels Δx = v T; its mean over the interval is the value at the midpoint times
-    sinc(κ Δx) (x linear in time). Position-mode instants average two intervals with
-    triangular weights, whose gain is sinc².
-    """
-    g = np.asarray(np.sinc(wavenumber * data.v * data.period), dtype=np.float64)
-    out: FloatArray = g if data.mode == "speed" else g * g
-    return out
 
 
 def dynamic_part(e: Effect, data: EquationData) -> FloatArray:
