@@ -154,24 +154,26 @@ def headline(y: np.ndarray, u: np.ndarray, repeats: int, peer_ok: bool) -> None:
 
 def scaling_length(y: np.ndarray, u: np.ndarray, repeats: int, peer_ok: bool) -> None:
     st = Structure()
-    print("\ntime vs window length (ny=30, nu=40, degree 2, 15 terms; ms, median)")
+    print("\ntime vs window length (ny=30, nu=40, degree 2, 15 terms; thread CPU ms, median)")
     print(f"{'rows':>6} {'ours ofr':>10} {'ours iofr':>10} {'SysIdentPy':>11} {'ratio':>7}")
     for n in (500, 1000, 2000, 4000, 8000):
         yw, uw = y[:n + 40], u[:n + 40]
-        t_o, _ = median_time(lambda yw=yw, uw=uw: ours(yw, uw, st, 15), repeats)
-        t_i, _ = median_time(lambda yw=yw, uw=uw: ours(yw, uw, st, 15, "iofr", True),
-                             max(3, repeats // 3))
+        median_time(lambda yw=yw, uw=uw: ours(yw, uw, st, 15), repeats)
+        c_o = LAST_CPU
+        median_time(lambda yw=yw, uw=uw: ours(yw, uw, st, 15, "iofr", True),
+                    max(3, repeats // 3))
+        c_i = LAST_CPU
         if peer_ok:
-            t_p, _ = median_time(lambda yw=yw, uw=uw: peer(yw, uw, st, 15), 2)
-            print(f"{n:>6} {1e3 * t_o:>10.2f} {1e3 * t_i:>10.2f} {1e3 * t_p:>11.1f} "
-                  f"{t_p / t_o:>6.1f}x")
+            median_time(lambda yw=yw, uw=uw: peer(yw, uw, st, 15), 2)
+            print(f"{n:>6} {1e3 * c_o:>10.2f} {1e3 * c_i:>10.2f} {1e3 * LAST_CPU:>11.1f} "
+                  f"{LAST_CPU / c_o:>6.1f}x")
         else:
-            print(f"{n:>6} {1e3 * t_o:>10.2f} {1e3 * t_i:>10.2f} {'-':>11} {'-':>7}")
+            print(f"{n:>6} {1e3 * c_o:>10.2f} {1e3 * c_i:>10.2f} {'-':>11} {'-':>7}")
 
 
 def scaling_candidates(y: np.ndarray, u: np.ndarray, repeats: int, peer_ok: bool,
                        peer_max: int) -> None:
-    print("\ntime vs candidate count (1000 rows, 15 terms; ms, median; '-' = skipped)")
+    print("\ntime vs candidate count (1000 rows, 15 terms; thread CPU ms, median; '-' = skipped)")
     print(f"{'deg':>3} {'ny=nu':>5} {'candidates':>10} {'engine':>8} {'ours ofr':>10} "
           f"{'SysIdentPy':>11} {'ratio':>7}")
     for degree in (2, 3):
@@ -184,10 +186,11 @@ def scaling_candidates(y: np.ndarray, u: np.ndarray, repeats: int, peer_ok: bool
                 print(f"{degree:>3} {lags:>5} {m:>10} {engine:>8} {'-':>10} {'-':>11} {'-':>7}"
                       f"  (explicit matrix {1000 * m * 8 / 2**20:.0f} MB: skipped)")
                 continue
-            t_o, _ = median_time(lambda yw=yw, uw=uw, st=st: ours(yw, uw, st, 15),
-                                 max(3, repeats // 3))
+            median_time(lambda yw=yw, uw=uw, st=st: ours(yw, uw, st, 15), max(3, repeats // 3))
+            t_o = LAST_CPU
             if peer_ok and m <= peer_max:
-                t_p, _ = median_time(lambda yw=yw, uw=uw, st=st: peer(yw, uw, st, 15), 1)
+                median_time(lambda yw=yw, uw=uw, st=st: peer(yw, uw, st, 15), 1)
+                t_p = LAST_CPU
                 print(f"{degree:>3} {lags:>5} {m:>10} {engine:>8} {1e3 * t_o:>10.2f} "
                       f"{1e3 * t_p:>11.1f} {t_p / t_o:>6.1f}x")
             else:
