@@ -71,18 +71,23 @@ def test_sysid_view_parses_identify_gfrf_and_diagnostics() -> None:
     v.on_model(json.dumps(model))
     v.on_ridges(json.dumps({"stable": True, "h1": {"peaks": [{"freq_hz": 16.5}]},
                             "h2": {"ridges": [{"kind": "f1+f2", "freq_hz": 33.0}]}}))
+    v.on_model(json.dumps(dict(model, output="position")))
     v.on_validation([{"name": "ee", "level": 0, "message": "ok"},
-                     {"name": "ue", "level": 2, "message": "out of band"}])
+                     {"name": "ue", "level": 0, "message": "ok"}])
+    v.on_validation([{"name": "ue", "level": 2, "message": "out of band"}])  # replaces 'ue'
+    v.on_validation([{"name": "gfrf", "level": 0, "message": "stable"}])  # another source
     for i in range(3):
         v.on_change(float(i), [{"name": "cogging", "level": 1, "message": f"event {i}"}])
     snap = v.snapshot()
-    assert snap["model"]["n_terms"] == 2
-    assert [t["name"] for t in snap["model"]["terms"]] == ["y(k-1)", "u(k-1)"]
+    assert snap["model"]["n_terms"] == 2 and snap["model"]["output"] == "position"
+    assert sorted(snap["models"]) == ["position", "speed"]
+    assert [t["name"] for t in snap["models"]["speed"]["terms"]] == ["y(k-1)", "u(k-1)"]
     assert snap["ridges"] == {"stable": True, "h1": [16.5], "h2": [33.0], "h3": []}
-    assert [s["passed"] for s in snap["validation"]] == [True, False]
+    assert [(s["name"], s["passed"]) for s in snap["validation"]] == [
+        ("ee", True), ("ue", False), ("gfrf", True)]
     assert [c["message"] for c in snap["changes"]] == ["event 1", "event 2"]
     text = "\n".join(render_sysid(snap))
-    assert "y(k-1)=0.93" in text and "FAIL out of band" in text
+    assert "y(k-1)=0.93" in text and "FAIL out of band" in text and "R2 0.99" in text
     v.on_model("not json {")
     assert v.snapshot()["model"] == {"error": "not JSON"}
 

@@ -122,13 +122,14 @@ class SysIdView:
 
     max_events: int = 10
     model: dict[str, Any] | None = None
+    models: dict[str, dict[str, Any]] = field(default_factory=dict)
     ridges: dict[str, Any] | None = None
     ridge_frequencies: list[float] | None = None
     validation: list[dict[str, Any]] | None = None
     changes: list[dict[str, Any]] = field(default_factory=list)
 
     def on_model(self, text: str) -> None:
-        """A model message (identify JSON): keep terms, output, sample rate, fit."""
+        """A model message (identify JSON): keep terms and fit, the latest one per output."""
         obj = _parse_json(text)
         if obj is None:
             self.model = {"error": "not JSON"}
@@ -141,6 +142,7 @@ class SysIdView:
         fit = val.get("validation", {}) if isinstance(val, dict) else {}
         self.model = {"output": obj.get("output"), "n_terms": len(terms), "terms": terms,
                       "validation": fit if isinstance(fit, dict) else {}}
+        self.models[str(obj.get("output"))] = self.model
 
     def on_ridges(self, text: str) -> None:
         """A ridges message (gfrf JSON): keep the H1 peaks and H2/H3 ridge frequencies."""
@@ -159,8 +161,12 @@ class SysIdView:
         self.ridge_frequencies = [float(v) for v in values]
 
     def on_validation(self, statuses: list[dict[str, Any]]) -> None:
-        """A validation DiagnosticArray as dicts (name, level, message, values)."""
-        self.validation = [dict(s, passed=int(s.get("level", 0)) == 0) for s in statuses]
+        """A validation DiagnosticArray as dicts (name, level, message, values); a status
+        replaces the previous one of the same name (several nodes publish validations)."""
+        merged = {str(s.get("name", "")): s for s in self.validation or []}
+        for s in statuses:
+            merged[str(s.get("name", ""))] = dict(s, passed=int(s.get("level", 0)) == 0)
+        self.validation = list(merged.values())
 
     def on_change(self, stamp_s: float | None, statuses: list[dict[str, Any]]) -> None:
         """A change DiagnosticArray: append one event per status, keep the latest few."""
@@ -169,7 +175,7 @@ class SysIdView:
         del self.changes[:-self.max_events]
 
     def snapshot(self) -> dict[str, Any]:
-        return {"model": self.model, "ridges": self.ridges,
+        return {"model": self.model, "models": dict(self.models), "ridges": self.ridges,
                 "ridge_frequencies": self.ridge_frequencies,
                 "validation": self.validation, "changes": list(self.changes)}
 
@@ -180,6 +186,12 @@ def _fmt(value: Any) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
     return str(value)
+
+
+def _short(values: list[Any], limit: int = 6) -> str:
+    """``[a, b, c, ...] (N)`` for long lists, numbers in short form."""
+    text = ", ".join(_fmt(v) for v in values[:limit])
+    return f"[{text}, ...] ({len(values)})" if len(values) > limit else f"[{text}]"
 
 
 def render_topics(topics: list[dict[str, Any]]) -> list[str]:
@@ -198,22 +210,25 @@ def render_topics(topics: list[dict[str, Any]]) -> list[str]:
 def render_sysid(view: dict[str, Any]) -> list[str]:
     """Lines for the latest model, ridges, validation and change events."""
     model = view["model"]
+    lines: list[str] = []
     if model is None:
-        lines = ["model: (none yet)"]
+        lines.append("model: (none yet)")
     elif "error" in model:
-        lines = [f"model: {model['error']}"]
-    else:
-        terms = ", ".join(f"{t['name']}={_fmt(t['estimate'])}" for t in model["terms"][:8])
-        more = " ..." if model["n_terms"] > 8 else ""
-        lines = [f"model ({model['output']}, {model['n_terms']} terms): {terms}{more}"]
+        lines.append(f"model: {model['error']}")
+    for m in view["models"].values():
+        terms = ", ".join(f"{t['name']}={_fmt(t['estimate'])}" for t in m["terms"][:8])
+        more = " ..." if m["n_terms"] > 8 else ""
+        r2 = m["validation"].get("r2")
+        fit = f", validation R2 {_fmt(r2)}" if r2 is not None else ""
+        lines.append(f"model ({m['output']}, {m['n_terms']} terms{fit}): {terms}{more}")
     ridges = view["ridges"]
     if ridges is None and view["ridge_frequencies"] is None:
         lines.append("ridges: (none yet)")
     elif ridges is not None and "error" not in ridges:
-        lines.append(f"ridges: H1 peaks {ridges['h1']} Hz, H2 {ridges['h2']} Hz, "
-                     f"H3 {ridges['h3']} Hz")
+        lines.append(f"ridges: H1 peaks {_short(ridges['h1'])} Hz, H2 {_short(ridges['h2'])} "
+                     f"Hz, H3 {_short(ridges['h3'])} Hz")
     if view["ridge_frequencies"] is not None:
-        lines.append(f"ridge frequencies: {view['ridge_frequencies']}")
+        lines.append(f"ridge frequencies: {_short(view['ridge_frequencies'])}")
     validation = view["validation"]
     if validation is None:
         lines.append("validation: (none yet)")
