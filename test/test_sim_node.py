@@ -220,3 +220,46 @@ def test_bad_initial_parameters_raise_one_clear_error(ros_context: Any) -> None:
         MotorSimNode(context=ros_context, excitation="sine")
     with pytest.raises(SysIdError, match="rate applies to clock=sim only"):
         MotorSimNode(context=ros_context, clock="wall", rate=2.0)
+
+
+def test_run_time_rate_excitation_and_rejections(ros_context: Any) -> None:
+    """rate retimes the node, excitation switches at the current k, bad values are refused."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    from pmsm_sysid.nodes.sim_node import MotorSimNode
+
+    ns = _unique_ns()
+    col = Collector(ros_context, ns)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(col.node)
+    sim = MotorSimNode(context=ros_context, clock="sim", rate=0.0, seed=2, namespace=ns,
+                       cli_args=_remap_clock(ns))
+    try:
+        sim._timer.cancel()
+        assert sim._timer_period() == 0.0
+        assert sim.set_parameters([Parameter("rate", value=2.0)])[0].successful
+        assert sim._timer_period() == 0.001
+        sim._timer.cancel()
+        for name, value, reason in [("clock", "wall", "cannot change"),
+                                    ("mass_kg", -1.0, "mass_kg must be > 0"),
+                                    ("excitation", "sine", "unknown excitation"),
+                                    ("rate", -1.0, "rate must be >= 0")]:
+            res = sim.set_parameters([Parameter(name, value=value)])[0]
+            assert not res.successful and reason in res.reason, (name, res.reason)
+        assert sim.stepper.sim.plant == nominal_plant()
+        _wait_matched(ex, sim)
+        ex.add_node(sim)
+        sim.step(10)
+        assert sim.set_parameters([Parameter("excitation", value="chirp")])[0].successful
+        sim.step(5)
+        _spin_until(ex, lambda: col.count() >= 15)
+    finally:
+        ex.shutdown()
+        sim.destroy_node()
+        col.node.destroy_node()
+    _, thrust = col.arrays("thrust")
+    assert np.array_equal(thrust[:10], ExcitationSource("paper-speed", 500.0, seed=2).block(0, 10))
+    # the amplitude parameter keeps its value (50 N) across the switch
+    chirp = ExcitationSource("chirp", 500.0, seed=2, amplitude_n=50.0).block(10, 5)
+    assert np.array_equal(thrust[10:], chirp)
