@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
+from pmsm_sysid.core.discrepancy.averaging import interval_force, interval_friction
 from pmsm_sysid.core.discrepancy.closed_loop import (
     PositionLoop,
     reference_trajectory,
     run_closed_loop,
 )
-from pmsm_sysid.core.discrepancy.averaging import interval_force, interval_friction
 from pmsm_sysid.core.discrepancy.kinematics import (
     choose_filter,
     equation_data,
@@ -51,7 +51,7 @@ def _lag_reference(cmd: np.ndarray, period: float, tau: float, delay: float,
         acc = 0.0
         for j in range(steps):
             t = k * period + (j + 0.5) * h - delay
-            c = cmd[min(max(int(math.floor(t / period)), 0), len(cmd) - 1)] if t >= 0 else cmd[0]
+            c = cmd[min(max(math.floor(t / period), 0), len(cmd) - 1)] if t >= 0 else cmd[0]
             z = c + (z - c) * math.exp(-h / tau) if tau > 0 else c
             acc += z
         out[k] = acc / steps
