@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 from typing import NoReturn
@@ -47,7 +48,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: BLAS thread pools are set to one thread unless the user chose otherwise: the work here is
+#: many small products (a 71 x 71 x 1000 Gram per OFR step), for which a multi-threaded
+#: OpenBLAS on a busy 2-core machine measured 25x slower (1.6 s instead of 65 ms per fit).
+BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    for var in BLAS_THREAD_VARS:  # before any verb imports numpy
+        os.environ.setdefault(var, "1")
     from ..core.errors import SysIdError
 
     parser = build_parser()
