@@ -89,6 +89,12 @@ class Bar:
         except (OSError, ValueError):
             self.on = False
 
+    def finish(self) -> None:
+        """All the work is done (a count estimated up front may have been generous)."""
+        if self.total is not None:
+            self.done = max(self.done, self.total)
+        self.close()
+
     def close(self) -> None:
         if self._closed:
             return

@@ -80,8 +80,7 @@ def _prepare(out_dir: str | Path) -> Path:
 def _finish(sink: Sink, title: str, sections: list[Section], kind: str,
             subtitle: str = "", extra: tuple[Path, ...] = ()) -> ReportResult:
     index = write_page(sink.out_dir, title, sections, subtitle)
-    sink.tick()
-    sink.close()
+    sink.bar.finish()
     return ReportResult(index=index, kind=kind, figures=tuple(sink.files), data=dict(sink.data),
                         notes=tuple(sink.notes), extra_files=extra)
 
