@@ -150,6 +150,18 @@ def test_header_stamp_patch_equals_reserialisation() -> None:
     assert with_header_stamp(data, 7 * NS + 999_999_999) == serialize_message(msg)
 
 
+def test_topics_without_a_python_type_are_skipped() -> None:
+    from pmsm_sysid.nodes.replayer import has_header, publishable, remap_topics
+
+    ok, skipped = publishable({"/pmsm_sysid/model_typed": "pmsm_sysid/msg/NarxModel",
+                               "/pmsm/speed": "geometry_msgs/msg/TwistStamped",
+                               "/pmsm_sysid/model": "std_msgs/msg/String"})
+    assert skipped == {"/pmsm_sysid/model_typed": "pmsm_sysid/msg/NarxModel"}
+    assert has_header(ok["/pmsm/speed"]) and not has_header(ok["/pmsm_sysid/model"])
+    assert remap_topics(ok, "/axis2") == {"/pmsm/speed": "/axis2/speed",
+                                          "/pmsm_sysid/model": "/pmsm_sysid/model"}
+
+
 def _env(domain: int, tmp: Path) -> dict[str, str]:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                ROS_LOG_DIR=str(tmp / "ros_log"), PYTHONUNBUFFERED="1")

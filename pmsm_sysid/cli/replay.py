@@ -60,6 +60,9 @@ def run(args: argparse.Namespace) -> int:
             args.bag, context=session.context, rate=rate, loops=args.loop,
             namespace=args.namespace, wait_s=args.wait, burst=args.burst,
             drain_rate=args.drain_rate))
+        for topic, msgtype in sorted(node.skipped.items()):
+            print(f"replay: skipping {topic} ({msgtype}: no Python type for it here)",
+                  file=sys.stderr)
         topics = ", ".join(sorted(node.remap.values()))
         print(f"replaying {args.bag} on {topics} at "
               f"{'full speed' if rate == 0 else f'{rate:g}x'}", file=info, flush=True)

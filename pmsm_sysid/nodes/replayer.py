@@ -41,6 +41,19 @@ from ..topics import INPUT_TYPES
 
 # --- planning (no ROS) --------------------------------------------------------------------
 
+def publishable(topics: dict[str, str]) -> tuple[dict[str, str], dict[str, str]]:
+    """Split topic -> type into (types rclpy can publish here, the others)."""
+    ok, skipped = {}, {}
+    for topic, msgtype in topics.items():
+        try:
+            message_class(msgtype)
+        except BagError:
+            skipped[topic] = msgtype
+        else:
+            ok[topic] = msgtype
+    return ok, skipped
+
+
 def is_input(topic: str, msgtype: str) -> bool:
     """True for ``<ns>/thrust|speed|position`` carrying the contract's type."""
     return INPUT_TYPES.get(topic.rsplit("/", 1)[-1]) == msgtype
@@ -91,7 +104,7 @@ def loop_offset_ns(path: str | Path, headers: dict[str, bool]) -> int:
     steps: list[int] = []
     stamps: list[int] = []
     last: int | None = None
-    for m in iter_raw(path):
+    for m in iter_raw(path, headers):
         times.append(m.timestamp_ns)
         first_topic = first_topic or m.topic
         if m.topic == first_topic:
@@ -140,7 +153,10 @@ class ReplayerNode(Node):
         self.path = Path(path)
         self.rate, self.loops, self.burst, self.drain_rate = rate, loops, burst, drain_rate
         self.wait_s, self.settle_s, self.linger_s = wait_s, settle_s, linger_s
-        self.topics = bag_topics(self.path)
+        self.topics, self.skipped = publishable(bag_topics(self.path))
+        if not self.topics:
+            raise BagError(f"{self.path}: no topic with a message type available here "
+                           f"(skipped: {', '.join(sorted(self.skipped))})")
         self.remap = remap_topics(self.topics, namespace)
         self.headers = {t: has_header(ty) for t, ty in self.topics.items()}
         self.offset_ns = loop_offset_ns(self.path, self.headers) if loops != 1 else 0
@@ -185,7 +201,7 @@ class ReplayerNode(Node):
             self._timer.cancel()  # type: ignore[no-untyped-call]
 
     def _start_pass(self, index: int) -> None:
-        self._pass = _Pass(index, iter_raw(self.path))
+        self._pass = _Pass(index, iter_raw(self.path, self.topics))
         self.stats.passes = index + 1
 
     def _next(self) -> RawMessage | None:
