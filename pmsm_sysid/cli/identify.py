@@ -104,6 +104,17 @@ def _summary(d: dict[str, Any]) -> str:
     return "\n".join(out)
 
 
+def _alignment_note(report: Any, out: Any) -> None:
+    """Say what reading the bag dropped or noticed (nothing is printed for a clean bag)."""
+    r = report
+    if r.n_unaligned or r.n_duplicates or r.n_out_of_order or r.n_nonfinite or r.n_gaps:
+        print(f"warning: reading the bag: {r.summary()}", file=out)
+    if r.n_out_of_order:
+        print(f"warning: {r.n_out_of_order} messages are stamped earlier than messages "
+              "received before them (a clock jump?): they were sorted by stamp and repeated "
+              "stamps kept first-received", file=out)
+
+
 def run(args: argparse.Namespace) -> int:
     from ..bagio import read_recording
     from ..core.errors import DataError
@@ -116,14 +127,17 @@ def run(args: argparse.Namespace) -> int:
                           constant=not args.no_constant)
     config = FitConfig(structure=structure, n_terms=args.terms, criterion=args.criterion,
                        rho=args.rho, method=args.method, remove_dc=not args.keep_dc)
-    rec = read_recording(args.bag).recording
+    loaded = read_recording(args.bag)
+    rec = loaded.recording
     result = identify_recording(
         rec, input=args.input, output=args.output, config=config, estimate=args.estimate,
         validate=None if args.no_validate else args.validate, max_lag_corr=args.corr_lags,
     )
     d = result.to_dict()
     d["source"] = str(Path(args.bag).resolve())  # the recording, for 'report' figures
+    d["alignment"] = loaded.report.to_dict()
     out = sys.stderr if args.json == "-" else sys.stdout
+    _alignment_note(loaded.report, out)
     st = d["structure"]
     print(f"{d['input']} -> {d['output']}: {args.method}, {len(d['terms'])} terms of "
           f"{st['n_candidates']} candidates (ny={st['ny']}, nu={st['nu']}, degree="

@@ -10,9 +10,16 @@
   largest, i.e. directions within 20 dB of the strongest. A single tone gives 2 (3 with a
   d.c. level), s tones give 2s; a band-limited input gives about 2 x bandwidth / fs x nu.
   Sensor noise on a recorded tone (5 N on a 50 N sine: about 30 dB down per direction) is
-  not counted as excitation: it did not drive the plant. If that is below nu the fit is still made (it is the paper's
-  single-tone protocol) but a warning says so: input-lag terms are then not unique and the
-  model only describes responses to inputs like this one.
+  not counted as excitation: it did not drive the plant. If that is below nu the fit is
+  still made (it is the paper's single-tone protocol) but a warning says so: input-lag terms
+  are then not unique and the model only describes responses to inputs like this one.
+* Values so large that the degree-d regressors overflow float64 (sums of squares of x^d
+  beyond 1e300) -> DataError naming the signal: rescale it.
+* A signal that sits at its extreme value in >= 1 % of the samples (and takes more than 16
+  distinct values, so two-level inputs are exempt) -> a warning: saturated or clipped data
+  are not what drove, or came out of, the plant.
+* Stamps off one sampling grid (:func:`check_sampling`) -> DataError: lags across a gap, a
+  clock jump or a rate change would pair samples that are not one period apart.
 """
 
 from __future__ import annotations
@@ -29,6 +36,8 @@ from .model import Structure
 FloatArray = NDArray[np.float64]
 
 PE_REL_EIG = 1e-2
+OVERFLOW_LOG10 = 300.0  # largest log10 of a sum of squared regressors accepted
+SATURATION_SHARE = 0.01  # share of samples at the extreme value that is called saturation
 
 
 @dataclass(frozen=True)
@@ -58,6 +67,46 @@ def _finite(name: str, x: FloatArray) -> None:
             f"'{name}' has {int(bad.sum())} non-finite samples "
             f"(first at index {int(np.argmax(bad))})"
         )
+
+
+def _magnitude(name: str, x: FloatArray, degree: int) -> None:
+    """DataError if the degree-``degree`` regressors of x would overflow float64."""
+    peak = float(np.max(np.abs(x))) if x.size else 0.0
+    if peak > 0 and 2 * degree * np.log10(peak) + np.log10(x.size) > OVERFLOW_LOG10:
+        raise DataError(f"'{name}' reaches {peak:.3g}: too large for a degree-{degree} model "
+                        "(its regressors overflow float64); rescale the signal")
+
+
+def saturation(name: str, x: FloatArray) -> str | None:
+    """A warning if x sits at its maximum or minimum in >= 1 % of the samples (module doc)."""
+    x = np.asarray(x, dtype=np.float64)
+    n = x.size
+    if n < 100 or len(np.unique(x)) <= 16:
+        return None
+    for word, ext in (("maximum", float(np.max(x))), ("minimum", float(np.min(x)))):
+        count = int(np.count_nonzero(x == ext))
+        if count >= SATURATION_SHARE * n:
+            return (f"{name} sits at its {word} {ext:.6g} in {count} of {n} samples "
+                    f"({100.0 * count / n:.1f}%): saturated or clipped? Clipped data are not "
+                    "what drove, or came out of, the plant")
+    return None
+
+
+def check_sampling(t: FloatArray, sample_rate_hz: float, label: str, first: int = 0) -> None:
+    """DataError unless every stamp step of a window is within (0.5, 1.5) sample periods.
+
+    A longer step is a gap or a clock jump forward; a shorter one is a sample-rate change or
+    stamps folded back by a clock jump (sorted in between). ``first`` is the index of t[0] in
+    the recording, for the message."""
+    steps = np.diff(np.asarray(t, dtype=np.float64)) * float(sample_rate_hz)
+    bad = ~((steps > 0.5) & (steps < 1.5))
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise DataError(
+            f"{label} is not evenly sampled: {int(bad.sum())} stamp step(s) off the "
+            f"{sample_rate_hz:g} Hz grid, the first after sample {first + k} (t = {t[k]:.6g} s, "
+            f"step {steps[k]:.3g} periods): a gap, clock jump or rate change; choose a range "
+            "without one")
 
 
 def pe_order(u: FloatArray, structure: Structure, u_lags: FloatArray | None = None) -> int:
@@ -97,6 +146,8 @@ def validate_fit_data(
                         f"(got {y.shape} and {u.shape})")
     _finite(output_name, y)
     _finite(input_name, u)
+    _magnitude(output_name, y, structure.degree)
+    _magnitude(input_name, u, structure.degree)
     n, lag = len(y), structure.max_lag
     need = lag + 2 * n_params
     if n < need:
@@ -111,7 +162,8 @@ def validate_fit_data(
 
 def describe_fit_data(
     u: FloatArray, structure: Structure, input_name: str = "input",
-    u_lags: FloatArray | None = None,
+    u_lags: FloatArray | None = None, y: FloatArray | None = None,
+    output_name: str = "output",
 ) -> DataCheck:
     """The non-raising half: persistent-excitation order and warnings."""
     n = len(u)
@@ -119,8 +171,13 @@ def describe_fit_data(
     warnings: list[str] = []
     if order < structure.nu:
         warnings.append(
-            f"{input_name} is persistently exciting of order {order} only (< nu = {structure.nu} "
-            f"input lags): input-lag terms are not unique and the model holds for inputs like "
-            f"this one (e.g. a single tone gives order 2)")
+            f"insufficient excitation: {input_name} is persistently exciting of order "
+            f"{order} only (< nu = {structure.nu} input lags): input-lag terms are not "
+            f"unique and the model holds for inputs like this one (e.g. a single tone gives "
+            f"order 2)")
+    for name, x in ((input_name, u), (output_name, y)):
+        clipped = saturation(name, x) if x is not None else None
+        if clipped:
+            warnings.append(clipped)
     return DataCheck(n_samples=n, n_rows=n - structure.max_lag, pe_order=order,
                      pe_required=structure.nu, warnings=tuple(warnings))

@@ -9,14 +9,14 @@ samples before it too (:func:`identify_recording` does this when the recording h
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .candidates import candidate_set
-from .datacheck import DataCheck, describe_fit_data, validate_fit_data
+from .datacheck import DataCheck, check_sampling, describe_fit_data, validate_fit_data
 from .errors import IdentificationError
 from .iofr import iofr
 from .model import NarxModel, Structure
@@ -108,6 +108,17 @@ def _select(
     return res, greedy, 0
 
 
+def _shortfall(check: DataCheck, config: FitConfig, got: int, candidates: int) -> DataCheck:
+    """Add a warning when fewer terms than ``--terms`` were selectable (criterion terms)."""
+    if config.criterion != "terms" or got >= config.n_terms:
+        return check
+    why = (f"there are only {candidates} candidates" if candidates < config.n_terms else
+           "the remaining candidates are linearly dependent on the chosen ones on these data "
+           "(rank-deficient candidate set, e.g. u^2 = 1 for a two-level input)")
+    note = f"{got} terms instead of the {config.n_terms} asked for: {why}"
+    return replace(check, warnings=(*check.warnings, note))
+
+
 def fit_narx(
     y: FloatArray,
     u: FloatArray,
@@ -131,7 +142,8 @@ def fit_narx(
     u = np.asarray(u, dtype=np.float64)
     cset = candidate_set(st)
     base = lag_base(y, u, st)
-    check = describe_fit_data(u, st, input_name, base[:, 1 + st.ny :])
+    check = describe_fit_data(u, st, input_name, base[:, 1 + st.ny :], y=y,
+                              output_name=output_name)
     t = target(y, st)
     proj = make_projector(base, cset, config.engine)
     t1 = time.perf_counter()
@@ -139,6 +151,8 @@ def fit_narx(
     t2 = time.perf_counter()
     ls = least_squares(proj.columns(res.selected), t)
     t3 = time.perf_counter()
+    check = _shortfall(check, config, len(res.selected) - int(config.dc_removed),
+                       cset.n_candidates - int(config.dc_removed))
     model = NarxModel(
         terms=tuple(cset.terms[i] for i in res.selected.tolist()), estimates=ls.theta,
         std=ls.std, err=res.err, sample_rate_hz=float(sample_rate_hz),
@@ -270,6 +284,15 @@ def _check_range(label: str, rng: tuple[int, int], n: int) -> None:
         raise DataError(f"{label} range {start}:{stop} is outside the recording (0:{n})")
 
 
+def _check_grid(rec: Any, label: str, rng: tuple[int, int], lag: int) -> None:
+    """A window and the samples feeding its lags must be on one sampling grid."""
+    first = max(rng[0] - lag, 0)
+    what = f"{label} range {rng[0]}:{rng[1]}"
+    if first < rng[0]:
+        what += f" (lags from sample {first})"
+    check_sampling(np.asarray(rec.t[first : rng[1]]), float(rec.sample_rate_hz), what, first)
+
+
 def _excitation(u: FloatArray, fs: float) -> dict[str, Any] | None:
     try:
         from .identifiability import excitation_summary
@@ -303,6 +326,9 @@ def identify_recording(
     if validate is not None:
         _check_range("validation", validate, n)
     lag = cfg.structure.max_lag
+    _check_grid(rec, "estimation", estimate, lag)
+    if validate is not None:
+        _check_grid(rec, "validation", validate, lag)
     y_e, u_e = _extended(rec, output, estimate, lag), _extended(rec, input, estimate, lag)
     fs = float(rec.sample_rate_hz)
     fit = fit_narx(y_e, u_e, cfg, fs, input_name=input, output_name=output)
