@@ -326,8 +326,36 @@ def test_diagnose_json_tables(tmp_path: Path) -> None:
     r = cli("report", str(src), "--out", str(tmp_path / "rep"))
     assert r.returncode == 0, r.stderr
     text = (tmp_path / "rep" / "index.html").read_text()
-    for want in ("cogging", "amplitude_n=3.02", "0.031", "83.0%", "position"):
+    for want in ("cogging", "amplitude_n=3.02", "0.031", "83.0%", "position",
+                 "names no recording"):
         assert want in text
+
+
+@pytest.mark.slow
+def test_diagnose_json_figures_repeat_the_diagnosis(tmp_path: Path) -> None:
+    """report DIAGNOSE.json redraws exactly the figures of 'diagnose --report'."""
+    cog = REPO / "bags" / "paper_speed_cogging"
+    if not (cog / "metadata.yaml").is_file():
+        subprocess.run(["bash", str(REPO / "scripts" / "make_bags.sh")], cwd=REPO,
+                       check=True, timeout=600, capture_output=True)
+    diag = tmp_path / "diag.json"
+    r = cli("diagnose", "--plant", "plants/nominal.yaml", "--real", str(cog), "--json",
+            str(diag), "--report", str(tmp_path / "direct"))
+    assert r.returncode == 0, r.stderr
+    r = cli("report", str(diag), "--out", str(tmp_path / "rep"))
+    assert r.returncode == 0, r.stderr
+    direct = sorted((tmp_path / "direct").glob("*.png"))
+    assert len(direct) >= 4
+    check_page(tmp_path / "rep" / "index.html", {p.stem for p in direct})
+    for p in direct:
+        assert (tmp_path / "rep" / p.name).read_bytes() == p.read_bytes(), p.name
+    d = json.loads(diag.read_text())
+    d["mismatch"]["nrmse_before"] *= 1.5  # a JSON the recording no longer supports
+    diag.write_text(json.dumps(d))
+    r = cli("report", str(diag), "--out", str(tmp_path / "rep2"))
+    assert r.returncode == 0, r.stderr
+    check_page(tmp_path / "rep2" / "index.html", set())
+    assert "gave other results" in r.stdout
 
 
 @pytest.mark.parametrize("case", ["missing", "not_result", "bad_json", "out_is_file",

@@ -9,7 +9,8 @@ identify JSON          its model's figures; the time-domain ones from the record
                        by its ``source`` key (when found; otherwise the page says why)
 ``run --json`` summary its ``last_model`` as an identify JSON without a recording
 gfrf JSON              peak and ridge tables; the GFRF figures when it carries ``grid``
-diagnose JSON          its tables (see :mod:`.diagnose`)
+diagnose JSON          its tables; its figures by repeating the diagnosis on the recordings
+                       it names (when found and reproduced; otherwise the page says why)
 =====================  =====================================================================
 """
 
@@ -23,11 +24,12 @@ from typing import Any
 
 from ..core.errors import DataError, SysIdError
 from ..core.identify import FitConfig
-from .html import Facts, Section, write_page
+from .html import Facts, Note, Section, write_page
 from .sink import Sink
 
 SERIES_FIGURES = 6  # io, psd, predicted x2, correlation (+1 spare for validation absent)
 FREQ_FIGURES = 4
+DIAGNOSE_FIGURES = 5
 
 
 @dataclass(frozen=True)
@@ -178,11 +180,19 @@ def report_gfrf(g: Mapping[str, Any], json_path: Path, out_dir: str | Path) -> R
 
 
 def report_diagnose(d: Mapping[str, Any], json_path: Path, out_dir: str | Path) -> ReportResult:
+    """A diagnose JSON: its tables; the figures by repeating the diagnosis it describes."""
     from . import diagnose
 
-    sink = Sink(_prepare(out_dir), 1)
+    sink = Sink(_prepare(out_dir), 2 + DIAGNOSE_FIGURES)
     try:
         sections = diagnose.json_sections(d)
+        result, why = diagnose.rerun(d, json_path)
+        sink.tick()
+        if result is not None:
+            sections.insert(2, diagnose.figure_section(result, sink))
+        else:
+            sink.notes.append(f"diagnosis figures not drawn: {why}")
+            sections.insert(2, Section("Sim-to-real: figures", (Note(sink.notes[-1]),)))
         return _finish(sink, f"pmsm-sysid report: {json_path.name}", sections, "diagnose")
     finally:
         sink.close()

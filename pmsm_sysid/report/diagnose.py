@@ -1,14 +1,20 @@
 """Report sections of a sim-to-real diagnosis (the ``diagnose`` JSON, contract §3): where the
 mismatch lives, the named effects with their parameters, the corrected plant and the fit
-table before/after. Figures need the diagnosis' series, which the JSON does not carry; they
-are drawn by ``diagnose --report DIR`` (figure functions in :mod:`pmsm_sysid.plots.diagnose`).
+table before/after (:func:`json_sections`, also used by ``diagnose --report``).
+
+The figures need the diagnosis' series, which the JSON does not carry: :func:`rerun` repeats
+the diagnosis from the JSON's nominal plant, recordings (``real``, ``validate``) and
+thresholds, checks it reproduces the JSON, and :mod:`pmsm_sysid.plots.diagnose` draws it.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
+from ..core.errors import SysIdError
 from .html import Block, Facts, Note, Section, Table
 
 
@@ -68,10 +74,64 @@ def json_sections(d: Mapping[str, Any]) -> list[Section]:
         summary.append(Note("no significant missing physics"))
     found: list[Block] = [effects_table(d), fit_table(d)]
     found += [Note(str(n)) for n in d.get("notes") or []]
-    found.append(Note("residual figures are drawn by 'pmsm-sysid diagnose ... --report DIR' "
-                      "(the JSON holds no series)"))
     plants: list[Block] = [_plant(d.get("plant") or {})]
     return [Section("Sim-to-real: where the mismatch lives", tuple(summary)),
             Section("Sim-to-real: named effects and fit", tuple(found)),
             Section("Nominal plant", tuple(plants)),
             Section("Corrected plant", (_plant(d.get("corrected_plant") or {}),))]
+
+
+def _find(name: Any, json_path: Path) -> Path | None:
+    if not name:
+        return None
+    p = Path(str(name))
+    for cand in (p,) if p.is_absolute() else (p, json_path.parent / p):
+        if cand.exists():
+            return cand
+    return None
+
+
+def _same(d: Mapping[str, Any], again: Mapping[str, Any]) -> bool:
+    """The re-run found the same effects and the same misfit as the JSON says."""
+    names = [e["name"] for e in d.get("effects") or []]
+    before = (d.get("mismatch") or {}).get("nrmse_before")
+    now = again["mismatch"]["nrmse_before"]
+    return (names == [e["name"] for e in again["effects"]] and before is not None
+            and math.isclose(float(before), float(now), rel_tol=1e-6))
+
+
+def rerun(d: Mapping[str, Any], json_path: Path) -> tuple[Any, str]:
+    """(DiagnoseResult, "") when the diagnosis can be repeated as the JSON describes it,
+    else (None, why not)."""
+    from ..bagio import read_recording
+    from ..core.discrepancy import DiagnoseOptions, diagnose
+    from ..core.plant import plant_from_dict
+
+    real = _find(d.get("real"), json_path)
+    if real is None:
+        return None, (f"the recording {d.get('real')!r} named by the diagnose JSON is not "
+                      "there" if d.get("real") else "the diagnose JSON names no recording")
+    val = _find(d.get("validate"), json_path)
+    if d.get("validate") and val is None:
+        return None, f"the held-out recording {d.get('validate')!r} is not there"
+    method = d.get("method") or {}
+    replay = any((f or {}).get("output_error") for f in (d.get("fit") or {}).values())
+    opts = DiagnoseOptions(replay=replay, **{k: float(method[k]) for k in
+                                             ("alpha", "min_share") if k in method})
+    try:
+        result = diagnose(plant_from_dict(d["plant"]), read_recording(real).recording,
+                          read_recording(val).recording if val else None, opts)
+    except (SysIdError, KeyError, TypeError, ValueError) as exc:
+        return None, f"the diagnosis could not be repeated ({exc})"
+    if not _same(d, result.to_dict()):
+        return None, ("repeating the diagnosis on the recordings found today gave other "
+                      "results than the JSON (were the recordings changed?)")
+    return result, ""
+
+
+def figure_section(result: Any, sink: Any) -> Section:
+    """The diagnosis figures (:func:`pmsm_sysid.plots.diagnose.figures`) as a section."""
+    from ..plots.diagnose import figures
+
+    images = tuple(sink.figure(plot) for plot in figures(result))
+    return Section("Sim-to-real: figures", images)
