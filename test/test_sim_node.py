@@ -164,7 +164,7 @@ def test_cogging_switched_on_at_run_time(ros_context: Any) -> None:
     ex.add_node(col.node)
     sim = MotorSimNode(context=ros_context, plant=plant, seed=seed, clock="sim", rate=0.0,
                        namespace=ns, cli_args=_remap_clock(ns))
-    sim._timer.cancel()  # stepped by hand below
+    sim.stop_timer()  # stepped by hand below
     try:
         _wait_matched(ex, sim)
         ex.add_node(sim)
@@ -236,11 +236,11 @@ def test_run_time_rate_excitation_and_rejections(ros_context: Any) -> None:
     sim = MotorSimNode(context=ros_context, clock="sim", rate=0.0, seed=2, namespace=ns,
                        cli_args=_remap_clock(ns))
     try:
-        sim._timer.cancel()
+        sim.stop_timer()
         assert sim._timer_period() == 0.0
         assert sim.set_parameters([Parameter("rate", value=2.0)])[0].successful
         assert sim._timer_period() == 0.001
-        sim._timer.cancel()
+        sim.stop_timer()
         for name, value, reason in [("clock", "wall", "cannot change"),
                                     ("mass_kg", -1.0, "mass_kg must be > 0"),
                                     ("excitation", "sine", "unknown excitation"),

@@ -237,6 +237,10 @@ class MotorSimNode(Node):
             self.finished = True
         return done
 
+    def stop_timer(self) -> None:
+        """Stop the node's own pacing; the caller then publishes with :meth:`step`."""
+        self._timer.cancel()  # type: ignore[no-untyped-call]
+
     def _timer_period(self) -> float:
         """1/fs on the wall clock; rate 0: 0 (one callback per executor round); else
         1/(rate fs), at least 0.5 ms (several samples per callback beyond 2 kHz)."""
