@@ -182,6 +182,9 @@ def read_recording(
         else:
             streams = _read_triple(reader, layout)
             used = {topic: found[topic] for topic in layout.values()}
+            empty = [layout[s] for s in (tp.THRUST, tp.POSITION) if not streams[s][0]]
+            if empty:
+                raise BagError(f"{path}: no messages on {' and '.join(empty)} (empty recording)")
         custom = getattr(reader.storage.metadata, "custom", None) or {}
     speed = _seconds(streams[tp.SPEED]) if streams.get(tp.SPEED, ([], []))[0] else None
     try:

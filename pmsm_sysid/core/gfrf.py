@@ -95,6 +95,9 @@ class Gfrf:
             raise GfrfError("model has non-finite estimates")
         ymax = max((max(t.y_lags) for t in model.terms if t.y_lags), default=0)
         umax = max((max(t.u_lags) for t in model.terms if t.u_lags), default=0)
+        if max(ymax, umax) > MAX_LAG:
+            raise GfrfError(f"largest lag {max(ymax, umax)} exceeds {MAX_LAG}: the poles and "
+                            "GFRFs of such a model are not computed")
         a = np.zeros(ymax + 1)
         b = np.zeros(umax + 1)
         nl: list[_NlTerm] = []
@@ -186,6 +189,7 @@ class Gfrf:
 
 
 MAX_GRID = 2048      # per axis of a 2-D grid (4.2 M points)
+MAX_LAG = 1024       # largest lag of a model (its poles: eigenvalues of a MAX_LAG^2 matrix)
 MAX_CURVE = 1 << 20  # points of a 1-D curve
 
 

@@ -127,6 +127,9 @@ class NarxModel:
 
     def __post_init__(self) -> None:
         n = len(self.terms)
+        fs = self.sample_rate_hz
+        if not (isinstance(fs, (int, float)) and np.isfinite(fs) and fs > 0):
+            raise IdentificationError(f"sample_rate_hz must be a positive number, got {fs!r}")
         if len(self.estimates) != n:
             raise IdentificationError(f"{n} terms but {len(self.estimates)} estimates")
         for name in ("std", "err"):
