@@ -116,8 +116,10 @@ def rerun(d: Mapping[str, Any], json_path: Path) -> tuple[Any, str]:
         return None, f"the held-out recording {d.get('validate')!r} is not there"
     method = d.get("method") or {}
     replay = any((f or {}).get("output_error") for f in (d.get("fit") or {}).values())
-    opts = DiagnoseOptions(replay=replay, **{k: float(method[k]) for k in
-                                             ("alpha", "min_share") if k in method})
+    defaults = DiagnoseOptions()
+    opts = DiagnoseOptions(alpha=float(method.get("alpha", defaults.alpha)),
+                           min_share=float(method.get("min_share", defaults.min_share)),
+                           replay=replay)
     try:
         result = diagnose(plant_from_dict(d["plant"]), read_recording(real).recording,
                           read_recording(val).recording if val else None, opts)
