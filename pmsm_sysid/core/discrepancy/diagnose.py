@@ -137,10 +137,12 @@ def _shares(fit: Fit, data: EquationData) -> list[float]:
 
 
 def _confidence(sig: float, held: Any, alt: Alternative | None, alpha: float) -> str:
+    """high: overwhelming on both data sets and no look-alike tie; moderate: significant
+    and significantly better on held-out data (or tied with a look-alike); low: otherwise."""
     tie = alt is not None and abs(alt.delta_chi2) < 3.84
     if held is not None and held.p_value < 1e-3 and sig >= 10.0 and not tie:
         return "high"
-    if sig >= -np.log10(alpha):
+    if sig >= -np.log10(alpha) and (held is None or held.significant):
         return "moderate"
     return "low"
 

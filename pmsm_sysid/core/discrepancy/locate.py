@@ -76,12 +76,29 @@ def _velocity_details(r: FloatArray, v: FloatArray) -> dict[str, Any]:
             "speed_range_mps": [float(v.min()), float(v.max())]}
 
 
-def _strongest_line(r: FloatArray, fs: float) -> tuple[float, float]:
-    """Frequency (Hz) of the largest periodogram line above 0 Hz, and its power share."""
-    spec = np.abs(np.fft.rfft(r - r.mean())) ** 2
-    freqs = np.fft.rfftfreq(len(r), 1.0 / fs)
-    k = int(np.argmax(spec[1:])) + 1
-    return float(freqs[k]), float(spec[k] / max(spec[1:].sum(), 1e-300))
+def _sincos(t: FloatArray, f: float) -> FloatArray:
+    return np.column_stack([np.sin(2 * math.pi * f * t), np.cos(2 * math.pi * f * t)])
+
+
+def _strongest_line(r: FloatArray, t: FloatArray, fs: float) -> tuple[float, float]:
+    """Frequency (Hz) of the strongest spectral line above 0 Hz, and its power share.
+
+    The peak of the periodogram is only good to half a bin (1/(2T)), which over T seconds
+    is a phase error of up to π: the frequency is refined by least squares over ±1 bin.
+    """
+    rc = r - r.mean()
+    spec = np.abs(np.fft.rfft(rc, 8 * len(r))) ** 2  # zero-padded: 1/8 bin steps
+    freqs = np.fft.rfftfreq(8 * len(r), 1.0 / fs)
+    k = int(np.argmax(spec[8:])) + 8
+    bin_hz = fs / len(r)
+    tt = t - t[0]
+    best = (0.0, float(freqs[k]))
+    for f in np.linspace(freqs[k] - bin_hz, freqs[k] + bin_hz, 41):
+        if f <= 0:
+            continue
+        _, e = lstsq(_sincos(tt, float(f)), rc)
+        best = max(best, (float(rc @ rc - e @ e), float(f)))
+    return best[1], best[0] / max(float(rc @ rc), 1e-300)
 
 
 def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
@@ -112,9 +129,8 @@ def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
         else:
             details = _velocity_details(r, v)
         out.append(AxisFinding(axis, share, -test.corrected_log10_p(len(AXES)), details))
-    f0, line_share = _strongest_line(r, data.sample_rate_hz)
-    tt = t - t[0]
-    cols = np.column_stack([np.sin(2 * math.pi * f0 * tt), np.cos(2 * math.pi * f0 * tt)])
+    f0, line_share = _strongest_line(r, t, data.sample_rate_hz)
+    cols = _sincos(t - t[0], f0)
     test = nested_f_test(y, base, cols)
     _, r1 = lstsq(np.hstack([base, cols]), y)
     out.append(AxisFinding("frequency", float(r @ r - r1 @ r1) / yy,

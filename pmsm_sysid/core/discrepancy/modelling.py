@@ -9,8 +9,9 @@
    lone Stribeck term unless the hump fits better by that margin -- the simpler, more
    common effect wins a tie, and the margin is reported.
 4. Held-out confirmation: every effect must reduce the mean-square equation error on data
-   it was not fitted on (Diebold-Mariano, one-sided 5 %); the weakest failure is dropped
-   and the model rebuilt until all pass.
+   it was not fitted on; the weakest failure is dropped and the model rebuilt until all
+   pass. How surely it does (Diebold-Mariano, one-sided) sets the reported confidence: a
+   short held-out segment may confirm a small effect without statistical force.
 """
 
 from __future__ import annotations

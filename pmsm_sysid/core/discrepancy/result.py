@@ -46,7 +46,7 @@ class FoundEffect:
         if self.held_out is not None:
             h = self.held_out
             out["held_out"] = {"reduction": h.reduction, "z": h.z, "p_value": h.p_value,
-                               "confirmed": h.confirmed}
+                               "confirmed": h.confirmed, "significant": h.significant}
         if self.alternative is not None:
             out["alternative"] = self.alternative
         if self.notes:
