@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import functools
-import io
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -12,6 +11,7 @@ from typing import Any, ParamSpec
 import matplotlib
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from PIL import Image as PILImage  # a dependency of matplotlib
 
@@ -76,12 +76,12 @@ def save(plot: Plot, out_dir: str | Path, dpi: int = DPI, colours: int = 256) ->
     """
     path = Path(out_dir) / f"{plot.name}.png"
     path.parent.mkdir(parents=True, exist_ok=True)
-    buf = io.BytesIO()
+    canvas = FigureCanvasAgg(plot.figure)
     with matplotlib.rc_context(STYLE):
-        plot.figure.savefig(buf, format="png", dpi=dpi)
-    buf.seek(0)
-    with PILImage.open(buf) as img:
-        rgb = img.convert("RGB")
+        plot.figure.set_dpi(dpi)
+        canvas.draw()  # type: ignore[no-untyped-call]
+    rgba = np.asarray(canvas.buffer_rgba())  # type: ignore[no-untyped-call]
+    rgb = PILImage.fromarray(rgba, mode="RGBA").convert("RGB")
     if colours:
         rgb = rgb.quantize(colors=colours, method=PILImage.Quantize.MEDIANCUT,
                            dither=PILImage.Dither.NONE)
