@@ -22,7 +22,7 @@ from .iofr import iofr
 from .model import NarxModel, Structure
 from .ofr import CRITERIA, OfrResult, frols, information_criterion, least_squares
 from .prediction import one_step_ahead, simulate
-from .regressors import lag_base, make_projector, target
+from .regressors import Projector, lag_base, make_projector, target
 from .validation import CorrelationTests, FitMetrics, correlation_tests, fit_metrics
 
 FloatArray = NDArray[np.float64]
@@ -89,7 +89,7 @@ def _criterion_path(res: OfrResult, n_obs: int, criterion: str) -> FloatArray:
 
 
 def _select(
-    proj: Any, t: FloatArray, config: FitConfig, const: int | None
+    proj: Projector, t: FloatArray, config: FitConfig, const: int | None
 ) -> tuple[OfrResult, OfrResult, int]:
     """(final selection, greedy FROLS selection, number of exchanges)."""
     dc = config.dc_removed

@@ -191,47 +191,65 @@ def frols(
         raise IdentificationError(f"need at least one term (got {n_terms})")
     st0 = init if init is not None else start(proj, y, remove_dc)
     forced = [int(j) for j in forced]
-    capacity = min(len(forced) + n_terms, proj.n_candidates, len(st0.t))
-    st = _state(st0, capacity)
-    sst = st0.sst
-    if not sst > 0:
+    run = _Run(proj, _state(st0, min(len(forced) + n_terms, proj.n_candidates, len(st0.t))),
+               st0.sst, remove_dc, keep_basis)
+    if not run.sst > 0:
         raise IdentificationError("the output is constant: nothing to explain")
-    selected: list[int] = []
-    err: list[float] = []
-    sse = [sst]
+    if remove_dc:  # the d.c. level: centring already removed it (no basis vector)
+        run.st.usable[constant_index] = False
+        run.selected.append(int(constant_index))  # type: ignore[arg-type]
+        run.err.append(0.0)
+    for j in forced:
+        if not run.add(j, last=False):
+            raise IdentificationError(f"forced candidate {j} is linearly dependent")
+    run.greedy(n_terms, rho)
+    return run.result()
 
-    def add(j: int, last: bool) -> bool:
-        g = _take(proj, st, j, remove_dc, update=keep_basis or not last)
+
+class _Run:
+    """One forward regression: the running state and the selection so far."""
+
+    def __init__(self, proj: Projector, st: _State, sst: float, remove_dc: bool,
+                 keep_basis: bool) -> None:
+        self.proj, self.st, self.sst = proj, st, sst
+        self.remove_dc, self.keep_basis = remove_dc, keep_basis
+        self.selected: list[int] = []
+        self.err: list[float] = []
+        self.sse = [sst]
+        self.n_first = 0
+
+    def add(self, j: int, last: bool) -> bool:
+        g = _take(self.proj, self.st, j, self.remove_dc, update=self.keep_basis or not last)
         if g is None:
             return False
-        selected.append(j)
-        err.append(g * g / sst)
-        sse.append(float(st.r @ st.r))
+        self.selected.append(j)
+        self.err.append(g * g / self.sst)
+        self.sse.append(float(self.st.r @ self.st.r))
         return True
 
-    if remove_dc:  # the d.c. level: centring already removed it (no basis vector)
-        st.usable[constant_index] = False
-        selected.append(int(constant_index))  # type: ignore[arg-type]
-        err.append(0.0)
-    for j in forced:
-        if not add(j, last=False):
-            raise IdentificationError(f"forced candidate {j} is linearly dependent")
-    n_first = len(selected)
-    while len(selected) - n_first < n_terms and st.n_q < capacity:
-        if rho is not None and len(selected) > n_first and 1.0 - sum(err) < rho:
-            break
-        best = _best(st)
-        if best is None:
-            break
-        add(best, last=len(selected) - n_first + 1 >= n_terms or st.n_q + 1 >= capacity)
-    k = st.n_q
-    return OfrResult(
-        selected=np.array(selected, dtype=np.intp), err=np.array(err), sse=np.array(sse),
-        sst=sst, remove_dc=remove_dc, n_forced=n_first,
-        n_skipped=int(np.count_nonzero(~st.usable)) - len(selected),
-        basis_proj=np.array(st.proj_rows) if keep_basis else np.zeros((0, 0)),
-        rcoef=st.rcoef[:k, :k].copy() if keep_basis else np.zeros((0, 0)),
-    )
+    def greedy(self, n_terms: int, rho: float | None) -> None:
+        """Largest-ERR steps until n_terms more, 1 - sum ERR < rho, or nothing is left."""
+        self.n_first = first = len(self.selected)
+        cap = self.st.q.shape[1]
+        while len(self.selected) - first < n_terms and self.st.n_q < cap:
+            if rho is not None and len(self.selected) > first and 1.0 - sum(self.err) < rho:
+                break
+            best = _best(self.st)
+            if best is None:
+                break
+            last = len(self.selected) - first + 1 >= n_terms or self.st.n_q + 1 >= cap
+            self.add(best, last=last)
+
+    def result(self) -> OfrResult:
+        k, keep = self.st.n_q, self.keep_basis
+        return OfrResult(
+            selected=np.array(self.selected, dtype=np.intp), err=np.array(self.err),
+            sse=np.array(self.sse), sst=self.sst, remove_dc=self.remove_dc,
+            n_forced=self.n_first,
+            n_skipped=int(np.count_nonzero(~self.st.usable)) - len(self.selected),
+            basis_proj=np.array(self.st.proj_rows) if keep else np.zeros((0, 0)),
+            rcoef=self.st.rcoef[:k, :k].copy() if keep else np.zeros((0, 0)),
+        )
 
 
 def information_criterion(sse: FloatArray, n_obs: int, n_params: IntArray, kind: str) -> FloatArray:
