@@ -170,6 +170,26 @@ def test_marked_ridges_are_the_gfrf_json_ridges(built: ReportResult,
 
 
 @pytest.mark.slow
+def test_seed_table2_model_ridges(tmp_path: Path) -> None:
+    """The seed's own Table 2 model (no recording): its H2 ridges of all three kinds, drawn
+    where the gfrf verb puts them; the page says why there are no time-domain figures."""
+    model = REPO / "examples" / "paper_table2_speed.json"
+    res = build_report(model, tmp_path / "rep")
+    assert {p.stem for p in res.figures} == GFRF_FIGURES
+    check_page(res.index, GFRF_FIGURES)
+    assert "is not a recording found here" in res.index.read_text()
+    r = cli("gfrf", str(model), "--json", str(tmp_path / "g.json"))
+    assert r.returncode == 0, r.stderr
+    g = json.loads((tmp_path / "g.json").read_text())
+    data = res.data["h2_contour"]
+    want = _expected_lines(g["h2"]["ridges"], float(np.max(np.abs(data["f"]))))
+    got = _drawn_lines(list(data["ridges"]))
+    assert {k for k, _ in got} == {"f1", "f2", "f1+f2"}
+    assert [k for k, _ in got] == [k for k, _ in want]
+    assert np.allclose([c for _, c in got], [c for _, c in want], atol=1e-9)
+
+
+@pytest.mark.slow
 def test_correlation_band_is_196_over_root_n(built: ReportResult,
                                              identify_json: dict[str, Any]) -> None:
     d = identify_json

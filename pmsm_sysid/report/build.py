@@ -148,7 +148,7 @@ def _source(d: Mapping[str, Any], json_path: Path) -> tuple[Path | None, str]:
     for cand in (p, json_path.parent / p) if not p.is_absolute() else (p,):
         if cand.is_dir() or cand.is_file():
             return cand, ""
-    return None, f"the recording {src} named by the identify JSON is not there"
+    return None, f"the identify JSON's 'source' is not a recording found here ({src!r})"
 
 
 def report_identify(d: dict[str, Any], json_path: Path, out_dir: str | Path) -> ReportResult:
