@@ -117,7 +117,7 @@ def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
              "velocity": _bins(v, n_bins, True)[0]}
     n_freq = len(r) // 2
     for axis, ind in bases.items():
-        test = nested_f_test(y, base, ind)
+        test = nested_f_test(y, base, ind, null_whitening=True)
         _, r1 = lstsq(np.hstack([base, ind]), y)
         share = float(r @ r - r1 @ r1) / yy
         details: dict[str, Any] = {}

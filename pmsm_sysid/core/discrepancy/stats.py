@@ -83,14 +83,18 @@ class NestedTest:
 
 
 def nested_f_test(y: FloatArray, base: FloatArray, extra: FloatArray,
-                  poly: FloatArray | None = None) -> NestedTest:
+                  poly: FloatArray | None = None, null_whitening: bool = False) -> NestedTest:
     """Does ``extra`` explain significantly more of ``y`` than ``base`` alone?
 
     The whitening filter is fitted to the residual of the larger model (as feasible GLS
-    does), so that an effect present in ``y`` is not mistaken for coloured noise.
+    does), so that an effect present in ``y`` is not mistaken for coloured noise. A wide
+    generic basis (many bins) would soak up the slow part of the noise that way and make
+    the rest look whiter than the noise is; ``null_whitening`` then fits the filter to the
+    residual of ``base`` alone, which is the noise itself under the null hypothesis.
     """
     if poly is None:
-        _, e1 = lstsq(np.hstack([base, extra]), y)
+        cols = base if null_whitening else np.hstack([base, extra])
+        _, e1 = lstsq(cols, y)
         w = ar_whitener(e1)
     else:
         w = poly
