@@ -1,0 +1,51 @@
+"""The real EMPS recording (../shared, closed loop, 1 kHz) against its rigid-mass plant.
+
+The benchmark's IDIM-LS reference (Janot, Gautier, Brunot 2019): M = 95.1089 kg,
+Fv = 203.5034 N s/m, Fc = 20.3935 N, offset = -3.1648 N. With M and Fv in plants/emps.yaml,
+``diagnose`` must name Coulomb friction and the offset within 5 % and 10 % of those values
+and show the fit improve on held-out data. The recording goes through ``import-mat``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from conftest import EMPS_MAT
+
+from pmsm_sysid.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+FC_REF, OFFSET_REF = 20.3935, -3.1648
+
+
+@pytest.mark.slow
+def test_emps_names_coulomb_friction_and_offset(shared_dir: Path, tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    assert EMPS_MAT.is_file(), f"{EMPS_MAT} missing"
+    bag = tmp_path / "emps"
+    assert main(["import-mat", str(EMPS_MAT), "--out", str(bag)]) == 0
+    out = tmp_path / "emps.json"
+    assert main(["diagnose", "--plant", str(REPO / "plants" / "emps.yaml"), "--real",
+                 str(bag), "--json", str(out)]) == 0
+    summary = capsys.readouterr().out
+    d = json.loads(out.read_text())
+    named = {e["name"]: e for e in d["effects"] if e["name"] != "unexplained"}
+    coulomb, offset = named["coulomb_friction"], named["force_offset"]
+    assert coulomb["params"]["amplitude_n"] == pytest.approx(FC_REF, rel=0.05)
+    assert offset["params"]["amplitude_n"] == pytest.approx(OFFSET_REF, rel=0.10)
+    for e in (coulomb, offset):
+        assert e["held_out"]["confirmed"] and e["significance"] > 10
+    others = [e for n, e in named.items() if n not in ("coulomb_friction", "force_offset")]
+    assert all(e["explains"] < 0.05 for e in others), others
+    assert d["method"]["feedback"]["closed_loop"]  # the rig runs under position control
+    assert d["method"]["speed_source"] == "derived from position"
+    for seg in ("estimation", "validation"):
+        fit = d["fit"][seg]
+        assert fit["nrmse_after"] < 0.2 * fit["nrmse_before"], fit
+        assert fit["output_error"]["nrmse_after"] < 0.2 * fit["output_error"]["nrmse_before"]
+    assert "coulomb_friction" in summary and "force_offset" in summary
+    corrected = d["corrected_plant"]
+    assert corrected["coulomb_friction"]["amplitude_n"] == pytest.approx(FC_REF, rel=0.05)
+    assert corrected["mass_kg"] == pytest.approx(95.1089)
