@@ -30,9 +30,10 @@ independent, so it is the Binomial(n_lags, 0.05) quantile (6 of 41, 4 of 20). Fo
 ``u2e`` and ``u2e2`` the values at lags tau_i, tau_j are correlated like the input series
 itself (Cov = rho_a(tau_i - tau_j)/N for a = u', (u^2)'), so a narrow-band input makes
 exceedances come in runs: the quantile is then taken from 4000 seeded draws of N(0, R_a)
-with R_a the input's sample autocorrelation (Toeplitz), which reduces to the binomial one
-for a white input. With a single tone the count rule therefore allows long runs and the
-Bonferroni max rule does the work.
+with R_a the input's sample autocorrelation (Toeplitz). An input whose autocorrelation is
+within 3.5/sqrt(N) of zero at every lag 1..2L counts as white and gets the binomial
+quantile directly (the draws would reproduce it). With a single tone the count rule
+therefore allows long runs and the Bonferroni max rule does the work.
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ TEST_NAMES = ("ee", "ue", "u2e", "u2e2", "e_eu")
 ALPHA_COUNT = 0.005
 ALPHA_MAX = 0.005
 N_DRAWS = 4000
+WHITE_ACF = 3.5  # |rho(tau)| * sqrt(N) below this at every tau: the input counts as white
 
 
 @dataclass(frozen=True)
@@ -163,9 +165,14 @@ def _draws(n_lags: int) -> FloatArray:
     return z
 
 
-def _acf(a: FloatArray, max_shift: int) -> FloatArray:
-    """Biased sample autocorrelation rho_a(0..max_shift) (positive semi-definite)."""
-    return xcorr(a, a, np.arange(max_shift + 1, dtype=np.intp))
+def _acf(a: FloatArray, max_shift: int) -> FloatArray | None:
+    """Biased sample autocorrelation rho_a(0..max_shift) (positive semi-definite), or None
+    when the series is white within sampling error (|rho(tau)| <= 3.5/sqrt(N), tau >= 1):
+    then the binomial count quantile applies and no draws are needed."""
+    acf = xcorr(a, a, np.arange(max_shift + 1, dtype=np.intp))
+    if float(np.max(np.abs(acf[1:]), initial=0.0)) <= WHITE_ACF / np.sqrt(len(a)):
+        return None
+    return acf
 
 
 def _judge(
