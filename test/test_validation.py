@@ -47,7 +47,6 @@ def test_xcorr_matches_numpy_correlate() -> None:
     np.testing.assert_allclose(xcorr(a, b, lags), expected, rtol=1e-12, atol=1e-15)
 
 
-@pytest.mark.slow
 def test_null_hypothesis_passes_with_high_probability() -> None:
     """White residuals independent of a white input: all five pass in >= 90% of trials
     (the rule is designed for ~5% family-wise false alarms)."""
