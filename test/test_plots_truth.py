@@ -198,6 +198,10 @@ def test_predicted_figure_reports_the_nmse_it_draws() -> None:
     want = np.sum((y - yhat) ** 2) / np.sum((y - y.mean()) ** 2)
     assert data["nmse"] == pytest.approx(want, rel=1e-12)
     np.testing.assert_array_equal(data["predicted"], yhat)
+    diverged = yhat.copy()
+    diverged[150:] = np.nan  # a free run that diverged at k = 250
+    bad = plots.predicted_vs_measured(k, y, diverged, window="validation")
+    assert bad.data["nmse"] == float("inf") and "diverged at sample 250" in bad.caption
     io_data = plots.io_series(k, 2 * y, y).data
     np.testing.assert_array_equal(io_data["u"], 2 * y)
 

@@ -82,12 +82,12 @@ def psd_pair(f_norm: ArrayLike, psd_u: ArrayLike, psd_y: ArrayLike, sample_rate_
 
 
 def nmse(y: FloatArray, yhat: FloatArray) -> float:
-    """sum (y - yhat)^2 / sum (y - mean y)^2 over the finite predictions."""
-    ok = np.isfinite(yhat)
-    if not ok.any():
+    """sum (y - yhat)^2 / sum (y - mean y)^2; inf when the prediction is not finite
+    throughout (a diverged free run is NaN from where it diverged)."""
+    if not np.all(np.isfinite(yhat)):
         return float("inf")
-    d = y[ok] - yhat[ok]
-    return float(np.dot(d, d) / np.sum((y[ok] - y[ok].mean()) ** 2))
+    d = y - yhat
+    return float(np.dot(d, d) / np.sum((y - y.mean()) ** 2))
 
 
 @styled
@@ -110,14 +110,16 @@ def predicted_vs_measured(k: ArrayLike, y: ArrayLike, yhat: ArrayLike,
     _, ym = _line_data(lm)
     _, yp = _line_data(lp)
     score = nmse(ym, yp)
+    bad = np.flatnonzero(~np.isfinite(yp))
+    state = (f"diverged at sample {int(kk[bad[0]])}" if len(bad) else f"NMSE {score:.3g}")
     ax.set_ylabel(label(output_name))
     ax.legend(loc="upper right")
-    ax.set_title(f"{window} window: model predicted output, NMSE {score:.3g}")
+    ax.set_title(f"{window} window: model predicted output, {state}")
     ax_e.plot(kk, ym - yp, color="0.3")
     ax_e.set_ylabel("error")
     ax_e.set_xlabel("sample k")
     fig_no = "Figs. 4, 9" if window == "estimation" else "Figs. 5, 10"
     caption = (f"Model predicted output (Eq. 12: the model fed its own past outputs) against "
                f"the measured {output_name} on the {window} window, samples "
-               f"{int(kk[0])}-{int(kk[-1])}; NMSE {score:.3g} (seed {fig_no}).")
+               f"{int(kk[0])}-{int(kk[-1])}; {state} (seed {fig_no}).")
     return Plot(fig, name, caption, {"k": kk, "measured": ym, "predicted": yp, "nmse": score})
