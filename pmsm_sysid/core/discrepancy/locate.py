@@ -102,10 +102,15 @@ def _strongest_line(r: FloatArray, t: FloatArray, fs: float) -> tuple[float, flo
 
 
 def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
-              n_bins: int = N_BINS, total: float | None = None) -> list[AxisFinding]:
+              n_bins: int = N_BINS, total: float | None = None,
+              null_whitening: bool = False) -> list[AxisFinding]:
     """Axis findings for residual target ``y`` beyond the columns ``base`` (module doc).
 
-    Shares are fractions of ``total`` (default: the energy of ``y``).
+    Shares are fractions of ``total`` (default: the energy of ``y``). ``null_whitening``
+    (see :func:`.stats.nested_f_test`) keeps the bin tests at their level when ``y`` beyond
+    ``base`` is noise, as it is when looking for what the final model left unexplained;
+    describing a raw mismatch, where ``y`` is mostly the effect, it would whiten the effect
+    away.
     """
     t = thinned_times(data)
     x = thinned(data, data.x)
@@ -117,7 +122,7 @@ def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
              "velocity": _bins(v, n_bins, True)[0]}
     n_freq = len(r) // 2
     for axis, ind in bases.items():
-        test = nested_f_test(y, base, ind, null_whitening=True)
+        test = nested_f_test(y, base, ind, null_whitening=null_whitening)
         _, r1 = lstsq(np.hstack([base, ind]), y)
         share = float(r @ r - r1 @ r1) / yy
         details: dict[str, Any] = {}

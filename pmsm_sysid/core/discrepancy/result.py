@@ -109,7 +109,7 @@ class DiagnoseResult:
             if f:
                 lines.append(_fit_line(seg, f))
         strong = [w for w in self.where if w.significance >= 3.0]
-        if strong:
+        if strong and self.effects:
             lines.append("mismatch lives over: " + ", ".join(
                 f"{w.axis} ({w.share:.0%})" for w in sorted(strong, key=lambda w: -w.share)))
         lines += [f"note: {n}" for n in self.notes]

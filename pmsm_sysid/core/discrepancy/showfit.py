@@ -49,7 +49,8 @@ def scan_unexplained(fit: Fit, data: EquationData, alpha: float,
                      min_share: float) -> list[FoundEffect]:
     """Axes on which the final residual is still significantly structured."""
     X, fixed = design(fit.effects, data)
-    found = scan_axes(data, data.y - fixed, X, total=float(data.y @ data.y))
+    found = scan_axes(data, data.y - fixed, X, total=float(data.y @ data.y),
+                      null_whitening=True)
     out = []
     for f in found:
         if f.significance > -np.log10(alpha) and f.share >= min_share:
