@@ -38,6 +38,7 @@ FloatArray = NDArray[np.float64]
 PE_REL_EIG = 1e-2
 OVERFLOW_LOG10 = 300.0  # largest log10 of a sum of squared regressors accepted
 SATURATION_SHARE = 0.01  # share of samples at the extreme value that is called saturation
+RATE_TOLERANCE = 0.05  # a window's median stamp step may differ this much from the period
 
 
 @dataclass(frozen=True)
@@ -93,11 +94,13 @@ def saturation(name: str, x: FloatArray) -> str | None:
 
 
 def check_sampling(t: FloatArray, sample_rate_hz: float, label: str, first: int = 0) -> None:
-    """DataError unless every stamp step of a window is within (0.5, 1.5) sample periods.
+    """DataError unless every stamp step of a window is within (0.5, 1.5) sample periods and
+    their median within 5 % of one period.
 
     A longer step is a gap or a clock jump forward; a shorter one is a sample-rate change or
-    stamps folded back by a clock jump (sorted in between). ``first`` is the index of t[0] in
-    the recording, for the message."""
+    stamps folded back by a clock jump (sorted in between); a median off the period is a
+    stretch recorded at another rate. ``first`` is the index of t[0] in the recording, for
+    the message."""
     steps = np.diff(np.asarray(t, dtype=np.float64)) * float(sample_rate_hz)
     bad = ~((steps > 0.5) & (steps < 1.5))
     if bad.any():
@@ -107,6 +110,12 @@ def check_sampling(t: FloatArray, sample_rate_hz: float, label: str, first: int 
             f"{sample_rate_hz:g} Hz grid, the first after sample {first + k} (t = {t[k]:.6g} s, "
             f"step {steps[k]:.3g} periods): a gap, clock jump or rate change; choose a range "
             "without one")
+    med = float(np.median(steps)) if len(steps) >= 10 else 1.0
+    if abs(med - 1.0) > RATE_TOLERANCE:
+        raise DataError(
+            f"{label} is sampled at {sample_rate_hz / med:.4g} Hz (median stamp step), the "
+            f"recording at {sample_rate_hz:.4g} Hz: the sample rate changed; choose a range "
+            "recorded at the recording's rate")
 
 
 def pe_order(u: FloatArray, structure: Structure, u_lags: FloatArray | None = None) -> int:
