@@ -127,30 +127,39 @@ def h1_gain_phase(f_norm: ArrayLike, h1: ArrayLike, sample_rate_hz: float,
     else:
         ax_g.set_xlabel("normalised frequency (cycles/sample)")
     pk = [(float(p["freq_norm"]), float(p["gain_db"])) for p in peaks]
-    marks: list[tuple[float, float]] = []
-    if pk:
-        (lm,) = ax_g.plot([p[0] for p in pk], [p[1] for p in pk], "v", color="tab:red",
-                          markersize=6, label="H1 peaks (gfrf)")
-        marks = list(zip(np.asarray(lm.get_xdata()).tolist(),
-                         np.asarray(lm.get_ydata()).tolist(), strict=True))
+    marks = _mark_peaks(ax_g, pk)
     if pk or excited is not None:
         ax_g.legend(loc="upper right")
     ax_g.set_ylabel("gain (dB)")
     ax_g.set_title(title or "first-order GFRF H1(f)")
     ax_g.set_xlim(0.0, 0.5)
     hz_axis(ax_g, sample_rate_hz)
-    top = max(pk, key=lambda p: p[1]) if pk else None
-    where = (f"; largest peak {top[1]:.1f} dB at {top[0]:.4f} cycles/sample = "
-             f"{top[0] * sample_rate_hz:.2f} Hz" if top else "")
-    band = (f"; shaded: the band the estimation input excited, {excited[0]:.4f}-"
-            f"{excited[1]:.4f} cycles/sample (outside it H1 is extrapolated)"
-            if excited is not None else "")
-    caption = (f"First-order GFRF H1: gain{' and phase' if phase else ''}{where}{band} "
-               "(seed Figs. 12, 15).")
-    return Plot(fig, name, caption, {
+    return Plot(fig, name, _h1_caption(pk, sample_rate_hz, phase, excited), {
         "f_norm": np.asarray(lg.get_xdata(), dtype=np.float64),
         "gain_db": np.asarray(lg.get_ydata(), dtype=np.float64),
         "phase_deg": phase_deg, "peaks": marks})
+
+
+def _mark_peaks(ax: Any, pk: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Triangles at the peaks; returns the marked points read back from the artist."""
+    if not pk:
+        return []
+    (lm,) = ax.plot([p[0] for p in pk], [p[1] for p in pk], "v", color="tab:red",
+                    markersize=6, label="H1 peaks (gfrf)")
+    return list(zip(np.asarray(lm.get_xdata()).tolist(), np.asarray(lm.get_ydata()).tolist(),
+                    strict=True))
+
+
+def _h1_caption(pk: list[tuple[float, float]], fs: float, phase: bool,
+                excited: tuple[float, float] | None) -> str:
+    top = max(pk, key=lambda p: p[1]) if pk else None
+    where = (f"; largest peak {top[1]:.1f} dB at {top[0]:.4f} cycles/sample = "
+             f"{top[0] * fs:.2f} Hz" if top else "")
+    band = (f"; shaded: the band the estimation input excited, {excited[0]:.4f}-"
+            f"{excited[1]:.4f} cycles/sample (outside it H1 is extrapolated)"
+            if excited is not None else "")
+    return (f"First-order GFRF H1: gain{' and phase' if phase else ''}{where}{band} "
+            "(seed Figs. 12, 15).")
 
 
 def _ridge_caption(drawn: Sequence[Mapping[str, Any]], fs: float) -> str:
