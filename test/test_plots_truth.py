@@ -262,3 +262,24 @@ def test_progress_follows_the_terminal(monkeypatch: pytest.MonkeyPatch) -> None:
     assert "3/3" in out.getvalue()
     assert render(1, 4, "a", 2.0) == "a [" + "#" * 7 + "." * 21 + "]  25% 1/4 0:02 eta 0:06"
     assert render(7, None, "", 61.0) == "7 1:01"
+
+
+def test_core_never_imports_matplotlib() -> None:
+    """Plotting lives outside the numerical core: importing every core module loads
+    neither matplotlib nor Pillow."""
+    import subprocess
+    import sys
+
+    code = (
+        "import importlib, pkgutil, sys\n"
+        "import pmsm_sysid.core as core\n"
+        "for m in pkgutil.walk_packages(core.__path__, 'pmsm_sysid.core.'):\n"
+        "    importlib.import_module(m.name)\n"
+        "bad = sorted(n for n in sys.modules if n.split('.')[0] in ('matplotlib', 'PIL'))\n"
+        "print(len(list(pkgutil.walk_packages(core.__path__))), bad)\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    n, bad = r.stdout.split(" ", 1)
+    assert int(n) > 20 and bad.strip() == "[]", r.stdout
