@@ -63,13 +63,15 @@ def test_error_increase_is_one_sided() -> None:
     assert not any(det.update(i, f).changed for i, f in enumerate(stream))
 
 
-def test_non_finite_error_counts_as_large_and_missing_values_are_skipped() -> None:
+def test_non_finite_error_needs_two_windows_and_missing_values_are_skipped() -> None:
     det = ChangeDetector(FEATURES)
     for i, f in enumerate(_stream(50, 4)):
         det.update(i, f)
     d = det.update(50, {"gain_db": math.nan})
     assert d.state == "steady" and math.isnan(d.z["gain_db"])
-    d = det.update(51, {"err": math.inf})
+    d = det.update(51, {"err": math.inf})  # e.g. one diverged free run: not yet a change
+    assert d.state == "steady" and d.z["err"] == ChangeConfig().z_confirm
+    d = det.update(52, {"err": math.inf})
     assert d.changed and d.reasons == ("err",)
 
 

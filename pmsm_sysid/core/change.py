@@ -12,7 +12,8 @@ Decision (one rule for every feature): a change is reported at window j when som
 z >= ``z_fire``, or z >= ``z_confirm`` at both j and j-1 (a persistent shift). After a change
 the baselines are cleared and relearnt over ``warmup`` windows (no decision meanwhile), so the
 new regime becomes the reference. A value that is not finite counts as "no observation" for
-two-sided features and as +inf for one-sided (error-like) ones.
+two-sided features; for one-sided (error-like) ones, e.g. a diverged free run, it counts as
+exactly ``z_confirm``: a change once it happens on two windows in a row.
 
 Thresholds were calibrated on simulated runs of the nominal plant (no alarm over long
 stationary runs) and of cogging/payload switches (detected within three windows); see
@@ -63,7 +64,8 @@ class ChangeConfig:
 
 @dataclass(frozen=True)
 class ChangeDecision:
-    """Outcome for one window: ``state`` is ``learning``, ``steady`` or ``change``."""
+    """Outcome for one window: ``state`` is ``learning``, ``steady``, ``change`` or
+    ``unjudged`` (no feature values given)."""
 
     seq: int
     state: str
@@ -109,7 +111,8 @@ class RobustBaseline:
         return med, max(MAD_TO_SIGMA * mad, self._floor, self._rel * abs(med), 1e-300)
 
     def z(self, value: float, one_sided: bool) -> float:
-        """Robust z-score of ``value`` (signed excess for one-sided features, else |z|)."""
+        """Robust z-score of ``value`` (signed excess for one-sided features, else |z|);
+        +inf for a non-finite one-sided value, NaN for a non-finite two-sided one."""
         med, scale = self.centre_scale()
         if not math.isfinite(value):
             return math.inf if one_sided else math.nan
@@ -136,10 +139,14 @@ class ChangeDetector:
         """Judge window ``seq`` from its feature ``values`` (unknown names are ignored)."""
         vals = {k: float(values[k]) for k in self.features if k in values}
         cfg = self.config
+        if not vals:  # nothing judged this window: the next one is not "consecutive"
+            self._prev_hot = set()
+            return ChangeDecision(seq, "unjudged")
         if self._since_reset < cfg.warmup:
             self._learn(vals)
             return ChangeDecision(seq, "learning", values=vals)
         z = {k: self._base[k].z(v, self.features[k].one_sided) for k, v in vals.items()}
+        z = {k: cfg.z_confirm if math.isinf(s) else s for k, s in z.items()}
         hot = {k for k, s in z.items() if s >= cfg.z_confirm}
         fire = sorted(k for k, s in z.items() if s >= cfg.z_fire)
         confirmed = sorted(hot & self._prev_hot)

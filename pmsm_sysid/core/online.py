@@ -1,4 +1,4 @@
-"""Streaming building blocks of online identification (pure Python + numpy, thread-safe).
+"""Streaming building blocks of online identification (pure Python + numpy; one caller thread).
 
 The data path of the identifier node, kept free of ROS so it can be tested on plain arrays:
 
@@ -112,6 +112,10 @@ class StampAligner:
         return self.period_ns // 2 if self.period_ns else 0
 
     @property
+    def samples_emitted(self) -> int:
+        return self._n["samples"]
+
+    @property
     def stats(self) -> AlignStats:
         return AlignStats(**self._n)
 
@@ -148,6 +152,11 @@ class StampAligner:
         entry.values = [float(v) for v in values]
         entry.count = len(values)
         return self._emit()
+
+    def count_unaligned(self, n_messages: int) -> None:
+        """Count messages that carried no usable sample (e.g. a JointState without the joint)."""
+        self._n["messages"] += n_messages
+        self._n["unaligned"] += n_messages
 
     def flush(self) -> list[Sample]:
         """Emit what is complete and give up on the rest (end of stream)."""

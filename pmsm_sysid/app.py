@@ -1,0 +1,290 @@
+"""Compose the package's nodes in one process: one SingleThreadedExecutor, spun here.
+
+``build_pipeline(nodes=("sim", "identifier", "gfrf"), ...)`` creates the chosen nodes on one
+rclpy Context (a private one from ``ROS_DOMAIN_ID``, or the caller's), adds them to one
+executor and yields a :class:`Pipeline`; on exit everything is shut down in the safe order
+(results flushed, recording finalised, executor, nodes, context). The nodes are ordinary
+importable classes, so a user's own process can compose them the same way.
+
+Clock: with ``clock="wall"`` the sim node paces itself to real time. With ``clock="sim"``
+and the identifier in the same process, the pipeline steps the simulator itself, ``burst``
+samples at a time, whenever the identifier has taken what was published (back-pressure), so
+the run is as fast as identification allows and loses nothing; without an identifier here,
+the sim node runs at ``rate`` x real time on its own timer.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from .core.errors import SysIdError
+from .core.plant import Plant
+from .topics import DEFAULT_NAMESPACE
+
+NODES = ("sim", "identifier", "gfrf")
+BACKLOG = 200  # samples the sim may run ahead of the identifier under back-pressure
+
+
+def parse_nodes(text: str | Sequence[str]) -> tuple[str, ...]:
+    """``"sim,identifier"`` -> ("sim", "identifier"); SysIdError on unknown or empty."""
+    items = [s.strip() for s in (text.split(",") if isinstance(text, str) else text)]
+    items = [s for s in items if s]
+    bad = [s for s in items if s not in NODES]
+    if bad or not items:
+        raise SysIdError(f"--nodes takes a comma list of {', '.join(NODES)} (got "
+                         f"'{','.join(items) if not bad else ','.join(bad)}')")
+    return tuple(dict.fromkeys(items))
+
+
+def overrides(values: Mapping[str, Any] | None) -> list[Parameter]:
+    return [Parameter(k, value=v)  # type: ignore[no-untyped-call]
+            for k, v in (values or {}).items()]
+
+
+@dataclass
+class Pipeline:
+    """The running nodes of one process and the loop that spins them."""
+
+    context: Context
+    executor: SingleThreadedExecutor
+    nodes: dict[str, Any]
+    clock: str
+    stop: threading.Event = field(default_factory=threading.Event)
+    recorder: Any = None
+    started: float = field(default_factory=time.monotonic)
+
+    @property
+    def sim(self) -> Any:
+        return self.nodes.get("sim")
+
+    @property
+    def identifier(self) -> Any:
+        return self.nodes.get("identifier")
+
+    @property
+    def gfrf(self) -> Any:
+        return self.nodes.get("gfrf")
+
+    @property
+    def stepped(self) -> bool:
+        """True when this pipeline steps the simulator itself (sim clock, back-pressure)."""
+        return self.clock == "sim" and self.sim is not None and self.identifier is not None
+
+    def run(self, duration_s: float | None = None,
+            until: Callable[[], bool] | None = None) -> None:
+        """Spin until ``until()``, the stop event, or ``duration_s``: simulated seconds when
+        this pipeline steps the simulator, wall-clock seconds otherwise (None = no limit)."""
+        limit = None
+        if duration_s is not None and self.stepped:
+            limit = round(duration_s * self.sim.fs)
+            duration_s = None
+        deadline = None if duration_s is None else time.monotonic() + duration_s
+        while not self.stop.is_set() and self.context.ok():
+            if until is not None and until():
+                return
+            if deadline is not None and time.monotonic() >= deadline:
+                return
+            if self.stepped:
+                if limit is not None and self.sim.published >= limit and self._caught_up():
+                    return
+                self._step_sim(limit)
+            self.executor.spin_once(timeout_sec=0.0 if self.stepped else 0.05)
+
+    def _caught_up(self) -> bool:
+        return bool(self.identifier.engine.samples_received >= self.sim.published)
+
+    def _step_sim(self, limit: int | None) -> None:
+        sim, ident = self.sim, self.identifier
+        backlog = sim.published - ident.engine.samples_received
+        if backlog < BACKLOG and (limit is None or sim.published < limit):
+            burst = int(sim.values["burst"])
+            sim.step(burst if limit is None else min(burst, limit - sim.published))
+
+    def finish(self, timeout_s: float = 30.0) -> None:
+        """Fit what is queued, publish it, and let the GFRF node analyse the last models."""
+        ident = self.identifier
+        if ident is None:
+            self.run(0.3)
+            return
+        ident.engine.flush()
+        ident.engine.wait_idle(timeout_s)
+        ident.publish_results()
+        if self.gfrf is not None:
+            t_end = time.monotonic() + timeout_s
+            want = ident.models_published
+            while time.monotonic() < t_end and self.context.ok():
+                self.executor.spin_once(timeout_sec=0.02)
+                if self.gfrf.received >= want and self.gfrf.worker.stats.processed >= want:
+                    self.gfrf.publish_results()
+                    break
+        self.executor.spin_once(timeout_sec=0.05)
+
+    def summary(self) -> dict[str, Any]:
+        """The ``run --json`` summary (contract §3 keys plus per-node details)."""
+        return pipeline_summary(self)
+
+
+def _make_node(name: str, ctx: Context, opts: dict[str, Any]) -> Node:
+    if name == "sim":
+        from .nodes.sim_node import MotorSimNode
+
+        return MotorSimNode(context=ctx, plant=opts["plant"], excitation=opts["excitation"],
+                            seed=opts["seed"], namespace=opts["namespace"],
+                            clock=opts["clock"], rate=opts["rate"],
+                            parameter_overrides=overrides(opts["sim_params"]))
+    if name == "identifier":
+        from .nodes.identifier_node import IdentifierNode
+
+        return IdentifierNode(context=ctx, namespace=opts["namespace"],
+                              parameter_overrides=overrides(opts["identifier_params"]))
+    from .nodes.gfrf_node import GfrfNode
+
+    n_outputs = len((opts["identifier_params"] or {}).get("outputs", ("speed", "position")))
+    params = {"queue_size": max(2, n_outputs), **(opts["gfrf_params"] or {})}
+    return GfrfNode(context=ctx, parameter_overrides=overrides(params))
+
+
+@contextmanager
+def build_pipeline(
+    nodes: Sequence[str] = NODES, *, plant: Plant | None = None,
+    excitation: str = "paper-speed", seed: int = 0, clock: str = "wall", rate: float = 1.0,
+    namespace: str = DEFAULT_NAMESPACE, record: str | None = None,
+    identifier_params: Mapping[str, Any] | None = None,
+    sim_params: Mapping[str, Any] | None = None, gfrf_params: Mapping[str, Any] | None = None,
+    context: Context | None = None, domain_id: int | None = None,
+) -> Iterator[Pipeline]:
+    """Create ``nodes`` in one process and yield the :class:`Pipeline` (see module doc)."""
+    from .rosutil import ros_session
+
+    names = parse_nodes(nodes)
+    if clock not in ("wall", "sim"):
+        raise SysIdError(f"clock must be 'wall' or 'sim', got '{clock}'")
+    opts = {"plant": plant, "excitation": excitation, "seed": seed, "namespace": namespace,
+            "clock": clock, "rate": rate if clock == "sim" else 1.0,
+            "identifier_params": identifier_params, "sim_params": sim_params,
+            "gfrf_params": gfrf_params}
+    with _context(context, domain_id, ros_session) as (ctx, executor):
+        made: dict[str, Any] = {}
+        pipe = Pipeline(ctx, executor, made, clock)
+        try:
+            for name in names:
+                made[name] = _make_node(name, ctx, opts)
+                executor.add_node(made[name])
+            if pipe.stepped:
+                pipe.sim._timer.cancel()  # stepped by the pipeline (back-pressure)
+            if "identifier" in made or "gfrf" in made:
+                from .nodes.collector import ResultCollector
+
+                made["collector"] = ResultCollector(context=ctx)
+                executor.add_node(made["collector"])
+            if record is not None:
+                pipe.recorder = _recorder(ctx, executor, record, namespace, made)
+            pipe.started = time.monotonic()
+            yield pipe
+        finally:
+            _shutdown(pipe)
+
+
+@contextmanager
+def _context(context: Context | None, domain_id: int | None,
+             session: Any) -> Iterator[tuple[Context, SingleThreadedExecutor]]:
+    if context is None:
+        with session(domain_id) as s:
+            yield s.context, s.executor
+        return
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        yield context, executor
+    finally:
+        executor.shutdown(timeout_sec=2.0)
+
+
+def _recorder(ctx: Context, executor: SingleThreadedExecutor, path: str, namespace: str,
+              made: dict[str, Any]) -> Any:
+    """A RecorderNode (inputs and identification outputs) writing a new bag at ``path``."""
+    from .bagio import BagRecorder
+    from .nodes.recorder import RecorderNode
+
+    bag = BagRecorder(path)
+    try:
+        node = RecorderNode(bag, context=ctx, namespace=namespace)
+    except BaseException:
+        bag.close()
+        raise
+    made["recorder"] = node
+    executor.add_node(node)
+    return node
+
+
+def _shutdown(pipe: Pipeline) -> None:
+    """Finalise the recording first (it must survive anything after), then the nodes."""
+    rec = pipe.nodes.pop("recorder", None)
+    try:
+        if rec is not None:
+            rec.recorder.close()
+    finally:
+        if rec is not None:
+            pipe.executor.remove_node(rec)
+            rec.destroy_node()
+        for node in pipe.nodes.values():
+            pipe.executor.remove_node(node)
+            node.destroy_node()
+
+
+# --- the run summary ----------------------------------------------------------------------
+
+def _pick(by_output: Mapping[str, Any], order: Sequence[str]) -> Any:
+    for name in order:
+        if name in by_output:
+            return by_output[name]
+    return next(iter(by_output.values()), None)
+
+
+def pipeline_summary(pipe: Pipeline) -> dict[str, Any]:
+    """Contract keys (samples_received, samples_dropped, windows_fitted, windows_skipped,
+    last_model, last_ridges, last_validation) plus change_events and per-node details.
+    Counters of a node this process does not run are null."""
+    ident, gfrf, sim = pipe.identifier, pipe.gfrf, pipe.sim
+    col = pipe.nodes.get("collector")
+    out: dict[str, Any] = {
+        "nodes": [n for n in pipe.nodes if n in NODES], "clock": pipe.clock,
+        "wall_time_s": time.monotonic() - pipe.started,
+        "samples_published": sim.published if sim is not None else None,
+    }
+    keys = ("samples_received", "samples_dropped", "samples_missing", "unaligned",
+            "out_of_order", "duplicates", "windows_due", "windows_fitted", "windows_skipped",
+            "windows_failed", "fit_latency_p50_ms", "fit_latency_p99_ms", "fit_cpu_s")
+    stats = ident.engine.stats.to_dict() if ident is not None else {}
+    out.update({k: stats.get(k) for k in keys})
+    order = list(ident.params["outputs"]) if ident is not None else ["speed", "position"]
+    models = dict(ident.last["models"]) if ident is not None else dict(col.models if col else {})
+    ridges = dict(col.ridges) if col is not None else {}
+    if not ridges and gfrf is not None and gfrf.last_ridges:
+        ridges = {str(gfrf.last_ridges.get("output")): gfrf.last_ridges}
+    vals = dict(ident.last["validation"]) if ident is not None else {}
+    out.update({
+        "last_model": _pick(models, order), "last_ridges": _pick(ridges, order),
+        "last_validation": _pick(vals, order), "last_models": models,
+        "last_ridges_by_output": ridges, "last_validations": vals,
+        "models_published": ident.models_published if ident is not None else None,
+        "change_events": (list(ident.last["changes"]) if ident is not None
+                          else list(col.changes) if col is not None else []),
+        "errors": list(ident.errors) if ident is not None else [],
+    })
+    if gfrf is not None:
+        g = gfrf.summary()
+        out["gfrf"] = {k: v for k, v in g.items() if not k.startswith("last_")}
+    if pipe.recorder is not None:
+        out["recorded_messages"] = pipe.recorder.total
+        out["record"] = str(pipe.recorder.recorder.path)
+    return out

@@ -1,0 +1,75 @@
+"""ResultCollector: keeps the latest identification results seen on the output topics.
+
+Subscribes to ``/pmsm_sysid/model``, ``ridges``, ``validation`` and ``change`` (all sporadic:
+one message per window) and keeps, per output, the last model, ridges and validation
+statuses, plus every change event (bounded). ``run --json`` reports from it, so a process
+that only runs the identification side (``--nodes identifier,gfrf``) reports the same way
+as the one-process pipeline, and models can be compared across processes by ``model_id``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import deque
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.context import Context
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from ..topics import CHANGE_TOPIC, MODEL_TOPIC, RIDGES_TOPIC, VALIDATION_TOPIC
+from .monitor import diagnostic_dicts
+
+DEPTH = 50
+
+
+class ResultCollector(Node):
+    """Latest model/ridges/validation per output and the change events, from the topics."""
+
+    def __init__(self, *, context: Context | None = None, node_name: str = "pmsm_results",
+                 keep_models: int = 4096) -> None:
+        super().__init__(node_name, context=context)
+        self.models: dict[str, dict[str, Any]] = {}
+        self.model_log: deque[dict[str, Any]] = deque(maxlen=keep_models)
+        self.ridges: dict[str, dict[str, Any]] = {}
+        self.ridges_log: deque[dict[str, Any]] = deque(maxlen=keep_models)
+        self.validation: dict[str, dict[str, Any]] = {}
+        self.changes: deque[dict[str, Any]] = deque(maxlen=200)
+        self.counts = dict.fromkeys(("model", "ridges", "validation", "change"), 0)
+        self.create_subscription(String, MODEL_TOPIC, self._on_model, DEPTH)
+        self.create_subscription(String, RIDGES_TOPIC, self._on_ridges, DEPTH)
+        self.create_subscription(DiagnosticArray, VALIDATION_TOPIC, self._on_validation, DEPTH)
+        self.create_subscription(DiagnosticArray, CHANGE_TOPIC, self._on_change, DEPTH)
+
+    def _on_model(self, msg: String) -> None:
+        self.counts["model"] += 1
+        obj = _json(msg.data)
+        if obj is not None:
+            self.models[str(obj.get("output"))] = obj
+            self.model_log.append(obj)
+
+    def _on_ridges(self, msg: String) -> None:
+        self.counts["ridges"] += 1
+        obj = _json(msg.data)
+        if obj is not None:
+            self.ridges[str(obj.get("output"))] = obj
+            self.ridges_log.append(obj)
+
+    def _on_validation(self, msg: DiagnosticArray) -> None:
+        self.counts["validation"] += 1
+        for s in diagnostic_dicts(msg):
+            self.validation[s["name"]] = s
+
+    def _on_change(self, msg: DiagnosticArray) -> None:
+        self.counts["change"] += 1
+        for s in diagnostic_dicts(msg):
+            self.changes.append(s)
+
+
+def _json(text: str) -> dict[str, Any] | None:
+    try:
+        obj = json.loads(text)
+    except ValueError:
+        return None
+    return obj if isinstance(obj, dict) else None

@@ -1,0 +1,197 @@
+"""IdentifierNode: online NARX identification on the live topics (issue 5).
+
+Subscribes to ``<ns>/thrust|speed|position`` (contract §1) or, with ``input_layout:
+joint_state``, to one ``sensor_msgs/JointState`` topic (``effort``/``velocity``/``position`` of
+``joint_name``). The work is done by :class:`pmsm_sysid.core.engine.OnlineEngine` (alignment,
+window ring, fitting thread) around :class:`pmsm_sysid.core.tracker.WindowTracker` (fits,
+cross-validation, change detection); ``__init__`` only wires parameters, subscriptions,
+publishers and one timer that publishes finished results:
+
+* ``/pmsm_sysid/model`` (std_msgs/String): one identify-JSON per output and window, plus
+  ``window`` {start_stamp, end_stamp, seq, ...}, ``fit_time_ms`` and ``model_id``;
+* ``/pmsm_sysid/validation`` (diagnostic_msgs/DiagnosticArray): status
+  ``identifier/cross_validation/<output>`` per validated model (OK = pass, WARN = fail);
+* ``/pmsm_sysid/change`` (DiagnosticArray): status ``identifier/change/<output>`` at level
+  WARN for each detected plant change.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.context import Context
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from ..core.engine import EngineConfig, OnlineEngine, WindowError
+from ..core.errors import DataError
+from ..core.tracker import WindowResult, WindowTracker, tracker_config
+from ..rosutil import data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
+from ..topics import (
+    CHANGE_TOPIC,
+    DEFAULT_NAMESPACE,
+    INPUT_TYPES,
+    MODEL_TOPIC,
+    VALIDATION_TOPIC,
+    input_topic,
+)
+
+OK, WARN = DiagnosticStatus.OK, DiagnosticStatus.WARN
+
+#: Parameters and their defaults (paper structures: speed ny=30 nu=40, position ny=10 nu=10).
+DEFAULTS: dict[str, Any] = {
+    "input_layout": "topics", "joint_name": "", "joint_state_topic": "/joint_states",
+    "window": 1000, "hop": 250, "queue_size": 1, "sample_rate_hz": 0.0, "tolerance_s": 0.0,
+    "outputs": ["speed", "position"], "method": "ofr", "criterion": "terms",
+    "speed.ny": 30, "speed.nu": 40, "speed.degree": 2, "speed.delay": 1, "speed.terms": 15,
+    "position.ny": 10, "position.nu": 10, "position.degree": 2, "position.delay": 1,
+    "position.terms": 15, "min_r2": 0.9, "change.z_fire": 12.0, "change.z_confirm": 6.0,
+    "change.baseline": 24, "change.warmup": 8, "publish_period_s": 0.05,
+}
+
+
+def status(name: str, level: bytes, message: str, hardware_id: str,
+           values: dict[str, Any]) -> DiagnosticStatus:
+    """A DiagnosticStatus with ``values`` as strings (floats with full precision)."""
+    return DiagnosticStatus(
+        name=name, level=level, message=message, hardware_id=hardware_id,
+        values=[KeyValue(key=k, value=v if isinstance(v, str) else json.dumps(v))
+                for k, v in values.items()])
+
+
+class IdentifierNode(Node):
+    """Online identification: aligned samples -> windows -> models, validation, changes."""
+
+    def __init__(self, *, context: Context | None = None, namespace: str = DEFAULT_NAMESPACE,
+                 node_name: str = "pmsm_identifier",
+                 parameter_overrides: list[Parameter] | None = None) -> None:
+        super().__init__(node_name, context=context,
+                         parameter_overrides=parameter_overrides or [])
+        p = {k: self.declare_parameter(k, v).value for k, v in DEFAULTS.items()}
+        self.params = p
+        self.tracker = WindowTracker(tracker_config(p))
+        self.engine: OnlineEngine[WindowResult] = OnlineEngine(
+            EngineConfig(window=int(p["window"]), hop=int(p["hop"]),
+                         history=self.tracker.history, queue_size=int(p["queue_size"]),
+                         sample_rate_hz=float(p["sample_rate_hz"]),
+                         tolerance_s=float(p["tolerance_s"])),
+            self.tracker.process)
+        self.last: dict[str, Any] = {"models": {}, "validation": {}, "changes": []}
+        self.models_published = 0
+        self.errors: list[str] = []
+        self._model_pub = self.create_publisher(String, MODEL_TOPIC, 50)
+        self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION_TOPIC, 50)
+        self._change_pub = self.create_publisher(DiagnosticArray, CHANGE_TOPIC, 50)
+        self._subscribe(p, namespace)
+        self._timer = self.create_timer(float(p["publish_period_s"]), self.publish_results)
+        self.engine.start()
+
+    def _subscribe(self, p: dict[str, Any], namespace: str) -> None:
+        if p["input_layout"] == "topics":
+            for sig, type_name in INPUT_TYPES.items():
+                self.create_subscription(message_class(type_name), input_topic(namespace, sig),
+                                         self._on_message(sig), data_qos())
+        elif p["input_layout"] == "joint_state":
+            if not p["joint_name"]:
+                raise DataError("input_layout joint_state needs the joint_name parameter")
+            self.create_subscription(JointState, p["joint_state_topic"], self._on_joint_state,
+                                     data_qos())
+        else:
+            raise DataError(f"input_layout must be 'topics' or 'joint_state', got "
+                            f"'{p['input_layout']}'")
+
+    def _on_message(self, sig: str) -> Any:
+        push = self.engine.push
+
+        def callback(msg: Any) -> None:
+            push(sig, stamp_to_ns(msg.header.stamp), sample_value(sig, msg))
+
+        return callback
+
+    def _on_joint_state(self, msg: Any) -> None:
+        try:
+            i = list(msg.name).index(self.params["joint_name"])
+            values = (msg.effort[i], msg.velocity[i], msg.position[i])
+        except (ValueError, IndexError):
+            self.engine.aligner.count_unaligned(3)  # no such joint, or a short array
+            return
+        self.engine.push_sample(stamp_to_ns(msg.header.stamp), values)
+
+    # ------------------------------------------------------------------ publishing
+    def publish_results(self) -> None:
+        """Publish what the fitting thread finished (timer callback; also call at shutdown)."""
+        for r in self.engine.drain():
+            if isinstance(r, WindowError):
+                self._note_error(f"window {r.seq}: {r.error}")
+            else:
+                self._publish(r)
+
+    def _note_error(self, text: str) -> None:
+        self.errors.append(text)
+        del self.errors[:-20]
+        self.get_logger().warning(f"not fitted: {text}")  # type: ignore[no-untyped-call]
+
+    def _publish(self, r: WindowResult) -> None:
+        for e in r.errors:
+            self._note_error(f"{e['model_id']}: {e['error']}")
+        for model in r.models:
+            self._model_pub.publish(String(data=json.dumps(model, allow_nan=False)))
+            self.last["models"][model["output"]] = model
+            self.models_published += 1
+        stamp = stamp_from_ns(round(r.end_stamp * 1e9))
+        if r.validations:
+            arr = DiagnosticArray(status=[self._validation_status(v) for v in r.validations])
+            arr.header.stamp = stamp
+            self._val_pub.publish(arr)
+            for v in r.validations:
+                self.last["validation"][v["output"]] = v
+        if r.changes:
+            arr = DiagnosticArray(status=[self._change_status(c) for c in r.changes])
+            arr.header.stamp = stamp
+            self._change_pub.publish(arr)
+            self.last["changes"].extend(r.changes)
+            del self.last["changes"][:-100]
+            for c in r.changes:
+                self.get_logger().warning(  # type: ignore[no-untyped-call]
+                    f"plant change on {c['output']} at {c['window']['end_stamp']:.3f} s: "
+                    f"{c['reasons']}")
+
+    @staticmethod
+    def _validation_status(v: dict[str, Any]) -> DiagnosticStatus:
+        fr = v["free_run"]
+        n_est = sum(t["pass"] for t in v["correlation_tests"].values())
+        n_new = sum(t["pass"] for t in v["correlation_tests_validation"].values())
+        msg = (f"{'pass' if v['pass'] else 'fail'}: free-run NRMSE {fr['nrmse']:.3g}, "
+               f"R2 {fr['r2']:.4g} on the next window; correlation tests {n_est}/5 "
+               f"(estimation), {n_new}/5 (next window)")
+        values = {"model_id": v["model_id"], "nrmse": fr["nrmse"], "r2": fr["r2"],
+                  "diverged": fr["diverged"], "osa_r2": v["osa_r2"], "min_r2": v["min_r2"],
+                  "validated_on": v["validated_on"], "pass": v["pass"]}
+        for prefix, key in (("corr", "correlation_tests"),
+                            ("corr_next", "correlation_tests_validation")):
+            for name, t in v[key].items():
+                values[f"{prefix}.{name}"] = {k: t[k] for k in ("max_abs", "band", "pass")}
+        return status(f"identifier/cross_validation/{v['output']}", OK if v["pass"] else WARN,
+                      msg, v["model_id"], values)
+
+    @staticmethod
+    def _change_status(c: dict[str, Any]) -> DiagnosticStatus:
+        msg = f"plant change on {c['output']}: {', '.join(c['reasons'])}"
+        return status(f"identifier/change/{c['output']}", WARN, msg, c["model_id"],
+                      {"window": c["window"], "z": c["z"], "values": c["values"],
+                       "reasons": c["reasons"]})
+
+    # ------------------------------------------------------------------ summary
+    def summary(self) -> dict[str, Any]:
+        """Counters and the latest results (the ``run --json`` summary's identifier part)."""
+        return {**self.engine.stats.to_dict(), "models": dict(self.last["models"]),
+                "validation": dict(self.last["validation"]),
+                "change_events": list(self.last["changes"]), "errors": list(self.errors)}
+
+    def destroy_node(self) -> None:
+        self.engine.stop()
+        super().destroy_node()  # type: ignore[no-untyped-call]

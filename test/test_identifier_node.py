@@ -1,0 +1,192 @@
+"""IdentifierNode on live topics: wiring, message layouts, equality with the offline fit."""
+
+from __future__ import annotations
+
+import json
+import time
+from typing import Any
+
+import numpy as np
+import pytest
+
+from pmsm_sysid.core.identify import FitConfig, fit_narx
+from pmsm_sysid.core.model import NarxModel, Structure
+
+pytestmark = pytest.mark.ros
+PERIOD_NS = 2_000_000
+SMALL = {"window": 300, "hop": 100, "speed.ny": 3, "speed.nu": 3, "speed.terms": 6,
+         "position.ny": 3, "position.nu": 3, "position.terms": 6, "method": "ofr"}
+
+
+def _data(n: int, seed: int = 0) -> np.ndarray:
+    """(thrust, speed, position) of a known quadratic NARX system driven by noise."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(-1, 1, n)
+    y = np.zeros(n)
+    for k in range(2, n):
+        y[k] = 0.6 * y[k - 1] - 0.2 * y[k - 2] + 0.8 * u[k - 1] + 0.2 * u[k - 1] * y[k - 1]
+    y += 0.01 * rng.standard_normal(n)
+    return np.stack([u, y, np.cumsum(y) * 0.002], axis=1)
+
+
+class _Source:
+    """A plain node publishing samples on the contract topics or as JointState."""
+
+    def __init__(self, ctx: Any, joint: bool = False) -> None:
+        from rclpy.node import Node
+        from sensor_msgs.msg import JointState
+
+        from pmsm_sysid.rosutil import data_qos, make_sample_messages
+        from pmsm_sysid.topics import DEFAULT_NAMESPACE, INPUT_TYPES, input_topic
+
+        self.node = Node("test_source", context=ctx)
+        self._make = make_sample_messages
+        if joint:
+            self.pub = self.node.create_publisher(JointState, "/joint_states", data_qos())
+        else:
+            self.pubs = {s: self.node.create_publisher(type(m), input_topic(DEFAULT_NAMESPACE, s),
+                                                       data_qos())
+                         for s, m in make_sample_messages(0, 0, 0, 0).items() if s in INPUT_TYPES}
+
+    def sample(self, k: int, row: np.ndarray) -> None:
+        for sig, msg in self._make(k * PERIOD_NS, *row).items():
+            self.pubs[sig].publish(msg)
+
+    def joint(self, k: int, row: np.ndarray, names: list[str]) -> None:
+        from sensor_msgs.msg import JointState
+
+        from pmsm_sysid.rosutil import stamp_from_ns
+
+        msg = JointState(name=names)
+        msg.header.stamp = stamp_from_ns(k * PERIOD_NS)
+        i = names.index("axis") if "axis" in names else 0
+        vals = [[0.0] * len(names) for _ in range(3)]
+        for col in range(3):
+            vals[col][i] = float(row[col])
+        msg.effort, msg.velocity, msg.position = vals
+        self.pub.publish(msg)
+
+
+def _spin_until(executor: Any, done: Any, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not done() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.01)
+    assert done(), "timed out"
+
+
+def _run(ctx: Any, data: np.ndarray, params: dict[str, Any], joint: list[str] | None = None,
+         ) -> tuple[Any, list[dict[str, Any]], list[Any], list[Any]]:
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import String
+
+    from pmsm_sysid.nodes.identifier_node import IdentifierNode
+    from pmsm_sysid.topics import MODEL_TOPIC, VALIDATION_TOPIC
+
+    node = IdentifierNode(context=ctx, parameter_overrides=[
+        Parameter(k, value=v) for k, v in {**SMALL, **params}.items()])
+    src = _Source(ctx, joint=joint is not None)
+    models: list[dict[str, Any]] = []
+    vals: list[Any] = []
+    src.node.create_subscription(String, MODEL_TOPIC, lambda m: models.append(json.loads(m.data)),
+                                 100)
+    src.node.create_subscription(DiagnosticArray, VALIDATION_TOPIC, vals.append, 100)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    ex.add_node(src.node)
+    try:
+        end = time.monotonic() + 0.5  # let the subscriptions match before publishing
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        for k, row in enumerate(data):
+            src.joint(k, row, joint) if joint is not None else src.sample(k, row)
+            if k % 50 == 49:
+                _spin_until(ex, lambda k=k: node.engine.aligner.stats.messages >= 3 * (k - 10))
+        n_msgs = 3 * len(data)  # a JointState counts as its three signals
+        _spin_until(ex, lambda: node.engine.aligner.stats.messages >= n_msgs)
+        node.engine.flush()
+        assert node.engine.wait_idle(60)
+        node.publish_results()
+        expected = node.models_published
+        _spin_until(ex, lambda: len(models) >= expected)
+        stats = node.engine.stats
+        return stats, models, vals, node.summary()["errors"]
+    finally:
+        ex.shutdown()
+        node.destroy_node()
+        src.node.destroy_node()
+
+
+def test_models_on_the_topics_equal_the_offline_fit_of_the_same_window(ros_context: Any) -> None:
+    data = _data(1300)
+    stats, models, vals, errors = _run(ros_context, data, {})
+    assert errors == []
+    assert stats.samples_received == 1300 and stats.samples_dropped == 0
+    assert stats.samples_missing == 0 and stats.unaligned == 0
+    # windows end on the grid k+1 = 0 mod hop once window + 3 lag samples are in: 400..1300
+    assert stats.windows_skipped == 0 and stats.windows_fitted == stats.windows_due == 10
+    speed = [m for m in models if m["output"] == "speed"]
+    assert [m["window"]["stop_index"] for m in speed] == list(range(400, 1301, 100))
+    cfg = FitConfig(structure=Structure(3, 3, 2, 1), n_terms=6, method="ofr")
+    for m in speed:
+        a, b = m["window"]["start_index"], m["window"]["stop_index"]
+        assert m["window"]["start_stamp"] == pytest.approx(a * 0.002)
+        assert m["window"]["end_stamp"] == pytest.approx((b - 1) * 0.002)
+        ref = fit_narx(data[a - 3:b, 1], data[a - 3:b, 0], cfg, 500.0)  # as identify a:b
+        got = NarxModel.from_dict(m)
+        assert got.term_names == ref.model.term_names
+        np.testing.assert_allclose(got.estimates, ref.model.estimates, rtol=0, atol=1e-12)
+        assert m["model_id"] == f"speed/{b // 100}" and m["sample_rate_hz"] == 500.0
+        assert set(m) >= {"input", "output", "structure", "terms", "validation", "timing_ms",
+                          "window", "fit_time_ms"}
+        assert m["validation"]["validation"] is None  # independent data come later
+    # the true system's terms are found on every window after the first (3 lags of history)
+    assert {"y(k-1)", "y(k-2)", "u(k-1)", "y(k-1)u(k-1)"} <= set(speed[-1]["terms"][i]["name"]
+                                                                  for i in range(6))
+    statuses = [s for arr in vals for s in arr.status]
+    xval = [s for s in statuses if s.name == "identifier/cross_validation/speed"]
+    # the model of the window ending at s is validated on the window starting at s: s <= 1000
+    assert len(xval) == 7
+    for s in xval:
+        kv = {v.key: v.value for v in s.values}
+        on = json.loads(kv["validated_on"])
+        model_stop = int(s.hardware_id.split("/")[1]) * 100
+        assert on["start_stamp"] == pytest.approx(model_stop * 0.002)
+        assert json.loads(kv["r2"]) > 0.9 and json.loads(kv["pass"]) == (s.level == b"\x00")
+
+
+def test_joint_state_layout(ros_context: Any) -> None:
+    data = _data(700, seed=1)
+    stats, models, _, errors = _run(
+        ros_context, data, {"input_layout": "joint_state", "joint_name": "axis"},
+        joint=["base", "axis"])
+    assert errors == [] and stats.samples_received == 700 and stats.unaligned == 0
+    assert sorted({m["output"] for m in models}) == ["position", "speed"]
+    assert len(models) == 2 * 4  # windows ending at 400, 500, 600, 700
+
+
+def test_joint_state_without_the_joint_is_counted_not_used(ros_context: Any) -> None:
+    stats, models, _, _ = _run(ros_context, _data(120), {"input_layout": "joint_state",
+                                                         "joint_name": "missing"},
+                               joint=["axis"])
+    assert stats.samples_received == 0 and stats.unaligned == 3 * 120 and models == []
+
+
+@pytest.mark.parametrize("params,match", [
+    ({"input_layout": "can_bus"}, "input_layout"),
+    ({"input_layout": "joint_state"}, "joint_name"),
+    ({"outputs": ["torque"]}, "outputs"),
+    ({"method": "lasso"}, "method"),
+    ({"hop": 0}, "hop"),
+])
+def test_bad_parameters_raise_one_clear_error(ros_context: Any, params: dict[str, Any],
+                                              match: str) -> None:
+    from rclpy.parameter import Parameter
+
+    from pmsm_sysid.core.errors import SysIdError
+    from pmsm_sysid.nodes.identifier_node import IdentifierNode
+
+    with pytest.raises(SysIdError, match=match):
+        IdentifierNode(context=ros_context,
+                       parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
