@@ -124,7 +124,8 @@ def headline(y: np.ndarray, u: np.ndarray, repeats: int, peer_ok: bool) -> None:
     print(f"  ours   FROLS (ofr, SysIdentPy convention): {1e3 * t_ours:8.2f} ms "
           f"({1e3 * c_ours:.2f}) median of {repeats}")
     mem = peak_memory_mb(lambda: ours(yw, uw, st, 15))
-    print(f"  ours   peak extra memory (tracemalloc):    {mem:8.2f} MB")
+    mem_i = peak_memory_mb(lambda: ours(yw, uw, st, 15, "iofr", True))
+    print(f"  ours   peak extra memory (tracemalloc):    {mem:8.2f} MB (iOFR {mem_i:.2f} MB)")
     t_iofr, _ = median_time(lambda: ours(yw, uw, st, 15, "iofr", True), repeats)
     print(f"  ours   iOFR (default: d.c. removed):       {1e3 * t_iofr:8.2f} ms "
           f"({1e3 * LAST_CPU:.2f})")
