@@ -316,6 +316,20 @@ def test_identify_json_without_recording(built: ReportResult, tmp_path: Path) ->
 
 
 @pytest.mark.slow
+def test_run_summary_reports_its_last_model(built: ReportResult, tmp_path: Path) -> None:
+    """A 'run --json' summary: its last_model (identify shape) without a recording."""
+    model = json.loads((built.index.parent / "identify.json").read_text())
+    summary = {"samples_received": 5000, "samples_dropped": 0, "windows_fitted": 3,
+               "windows_skipped": 0, "last_model": model, "last_ridges": None,
+               "last_validation": None}
+    src = tmp_path / "run.json"
+    src.write_text(json.dumps(summary))
+    res = build_report(src, tmp_path / "rep")
+    assert res.kind == "identify" and {p.stem for p in res.figures} == GFRF_FIGURES
+    check_page(res.index, GFRF_FIGURES)
+
+
+@pytest.mark.slow
 def test_gfrf_json_reports(built: ReportResult, tmp_path: Path) -> None:
     g = tmp_path / "g.json"
     r = cli("gfrf", str(built.index.parent / "identify.json"), "--grid", "96", "--json", str(g))
