@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from ..physics import MotorSimulator
 from ..plant import Plant
 from ..signals import Recording
-from .stats import nrmse
+from ..validation import fit_metrics
 
 FloatArray = NDArray[np.float64]
 
@@ -51,5 +51,4 @@ def replay(plant: Plant, rec: Recording, horizon_s: float = HORIZON_S) -> Replay
             out[k:] = np.nan
             break
         sim.advance(float(rec.thrust[k]))
-    err = np.where(np.isfinite(out), out - rec.speed, np.inf)
-    return Replay(out, rec.speed, h / rec.sample_rate_hz, nrmse(rec.speed, err))
+    return Replay(out, rec.speed, h / rec.sample_rate_hz, fit_metrics(rec.speed, out).nrmse)

@@ -108,6 +108,12 @@ class DiagnoseResult:
             f = self.fit.get(seg)
             if f:
                 lines.append(_fit_line(seg, f))
+        tests = (self.fit.get("estimation") or {}).get("correlation_tests")
+        if tests:
+            fails = {k: [n for n, t in v.items() if not t["pass"]] for k, v in tests.items()}
+            lines.append("correlation tests (seed Eq. 13, prewhitened residual) failing: "
+                         f"before {', '.join(fails['before']) or 'none'}; "
+                         f"after {', '.join(fails['after']) or 'none'}")
         strong = [w for w in self.where if w.significance >= 3.0]
         if strong and self.effects:
             lines.append("mismatch lives over: " + ", ".join(

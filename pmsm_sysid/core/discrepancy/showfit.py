@@ -1,7 +1,8 @@
 """Before/after evidence: where the mismatch lives, what is left, and the fit table.
 
 * ``where_table``: the axis scan of the nominal residual (:mod:`.locate`), with the position
-  periodogram's peak (the best cogging pitch of the ERR ranking) added to the position axis.
+  periodogram's peak (the best cogging pitch of the ERR ranking) added to the position axis
+  (its share and significance are the larger of the bins' and the period's).
 * ``scan_unexplained``: the same scan on the final model's residual; an axis that still
   explains a significant share becomes an ``unexplained`` entry saying where it lives.
 * ``fit_table``: force (equation-error) NRMSE before/after, the Billings-Voon tests (seed
@@ -38,9 +39,14 @@ def where_table(data: EquationData, ranking: list[Step]) -> list[AxisFinding]:
     out = []
     for f in found:
         if f.axis == "position" and cog is not None:
+            sig = -cog.test.corrected_log10_p(cog.n_tests)
             extra = {"period_m": cog.effect.pitch_m, "period_share": cog.share,
-                     "period_significance": -cog.test.corrected_log10_p(cog.n_tests)}
-            f = AxisFinding(f.axis, f.share, f.significance, {**extra, **f.details})
+                     "period_significance": sig, "bins_share": f.share,
+                     "bins_significance": f.significance}
+            # 16 bins cannot draw a period shorter than a few bin widths: the axis is
+            # described by whichever of the two bases (bins, best period) sees more
+            f = AxisFinding(f.axis, max(f.share, cog.share), max(f.significance, sig),
+                            {**extra, **f.details})
         out.append(f)
     return out
 

@@ -18,6 +18,8 @@ from scipy import stats
 from scipy.linalg import solve_toeplitz
 from scipy.signal import lfilter
 
+from ..validation import fit_metrics
+
 FloatArray = NDArray[np.float64]
 
 MAX_AR_ORDER = 20
@@ -156,7 +158,5 @@ def held_out_test(e_without: FloatArray, e_with: FloatArray,
 
 
 def nrmse(target: FloatArray, error: FloatArray) -> float:
-    """||error|| / ||target - mean(target)|| (the contract's NRMSE)."""
-    t = np.asarray(target) - float(np.mean(target))
-    den = float(np.sqrt(t @ t))
-    return float(np.sqrt(error @ error)) / den if den > 0 else float("nan")
+    """||error|| / ||target - mean(target)||: the NRMSE of the prediction target - error."""
+    return fit_metrics(target, np.asarray(target) - np.asarray(error)).nrmse
