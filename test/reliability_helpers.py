@@ -49,10 +49,11 @@ def assert_one_line_error(proc: subprocess.CompletedProcess[str], *fragments: st
 
 def cli_error(capsys: Any, argv: list[str], *fragments: str) -> str:
     """As :func:`assert_one_line_error`, in this process (faster): ``main(argv)`` returns or
-    exits with 2 and prints one line; any Python warning fails the test (a separate process
-    would print it as more lines), any other exception propagates and fails it too."""
+    exits with 2 and prints one line; a RuntimeWarning (overflow, invalid value: a separate
+    process would print it as more lines) fails the test, any other exception propagates and
+    fails it too."""
     with warnings.catch_warnings():
-        warnings.simplefilter("error")
+        warnings.simplefilter("error", RuntimeWarning)
         try:
             rc = main(argv)
         except SystemExit as exc:

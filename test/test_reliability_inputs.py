@@ -325,3 +325,85 @@ def test_empty_bags_and_bags_without_definitions(tmp_path: Path, storage: str,
     back = read_recording(bare).recording  # the standard types are known: it reads the same
     for name in ("thrust", "speed", "position"):
         np.testing.assert_array_equal(back.signal(name), rec.signal(name))
+
+
+# ---------------------------------------------------------------- options, plants and GFRF
+
+
+@pytest.mark.parametrize("argv,fragments", [
+    (["--ny", "100000"], ["samples are too few", "maximum lag 100000"]),
+    (["--ny", "1000", "--nu", "1000"], ["candidate terms", "exceed the limit of 200000"]),
+    (["--ny", "0", "--nu", "0"], ["ny + nu > 0"]),
+    (["--delay", "0"], ["delay must be >= 1"]),
+    (["--degree", "4"], ["invalid choice: 4"]),
+    ([*SMALL, "--corr-lags", "0"], ["correlation tests need max_lag >= 1"]),
+    (["--estimate", "4000:6000"], ["estimation range 4000:6000 is outside the recording "
+                                   "(0:5000)"]),
+    ([*SMALL, "--validate", "4900:5001"], ["validation range 4900:5001 is outside"]),
+    (["--estimate", "10:5"], ["need 0 <= START < STOP, got '10:5'"]),
+    (["--estimate", "1e3:2e3"], ["expected START:STOP"]),
+    (["--rho", "2"], ["rho must be in (0, 1)"]),
+    (["--frobnicate", "1"], ["unrecognized arguments: --frobnicate 1"]),
+], ids=lambda v: "_".join(v) if isinstance(v, list) and v and v[0].startswith("-") else "")
+def test_impossible_identify_options(clean: dict[str, object], argv: list[str],
+                                     fragments: list[str],
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    cli_error(capsys, ["identify", str(clean["bag"]), *argv], *fragments)
+
+
+def test_bad_plant_files_one_line_in_every_verb_that_takes_one(
+        tmp_path: Path, clean: dict[str, object], capsys: pytest.CaptureFixture[str]) -> None:
+    negative = tmp_path / "negative.yaml"
+    negative.write_text("mass_kg: -2.3\nviscous_n_per_mps: 32.5\n")
+    unknown = tmp_path / "unknown.yaml"
+    unknown.write_text("mass_kg: 2.3\nvicsous_n_per_mps: 32.5\n")
+    assert_one_line_error(run_cli("diagnose", "--plant", str(negative), "--real",
+                                  str(clean["bag"])), "mass_kg must be > 0")
+    cli_error(capsys, ["diagnose", "--plant", str(unknown), "--real", str(clean["bag"])],
+              "unknown key 'vicsous_n_per_mps' (did you mean 'viscous_n_per_mps'?)")
+    cli_error(capsys, ["simulate", "--plant", str(negative), "--out", str(tmp_path / "s")],
+              "mass_kg must be > 0")
+    assert not (tmp_path / "s").exists()
+
+
+def _model_file(path: Path, terms: dict[str, float], **extra: object) -> Path:
+    path.write_text(json.dumps({"sample_rate_hz": 500.0, **extra, "terms": [
+        {"name": n, "estimate": v} for n, v in terms.items()]}))
+    return path
+
+
+def test_gfrf_of_impossible_models_is_one_line(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    ok = {"y(k-1)": 0.5, "u(k-1)": 1.0, "u(k-1)^2": 0.1}
+    lag = _model_file(tmp_path / "lag.json", {**ok, "y(k-5000)": 0.01})
+    assert_one_line_error(run_cli("gfrf", str(lag)), "largest lag 5000 exceeds 1024")
+    for fs, says in ((0.0, "sample_rate_hz must be a positive number, got 0.0"),
+                     (-500.0, "sample_rate_hz must be a positive number, got -500.0"),
+                     ("fast", "not a model JSON")):
+        cli_error(capsys, ["gfrf", str(_model_file(tmp_path / "fs.json", ok,
+                                                   sample_rate_hz=fs))], says)
+    nan = tmp_path / "nan.json"
+    nan.write_text('{"terms": [{"name": "u(k-1)", "estimate": NaN}]}')
+    cli_error(capsys, ["gfrf", str(nan)], "non-finite estimates")
+    cli_error(capsys, ["gfrf", str(_model_file(tmp_path / "ok.json", ok)), "--grid", "5000"],
+              "grid must be")
+
+
+def test_gfrf_of_unstable_linear_and_huge_models_is_finite(tmp_path: Path) -> None:
+    """Reported, not refused: an unstable linear part (flagged), no nonlinear terms (H2 = H3
+    = 0, said so), coefficients of 1e150 (finite numbers or documented nulls, never NaN)."""
+    cases = {
+        "unstable": ({"y(k-1)": 1.2, "u(k-1)": 1.0, "u(k-1)^2": 0.1}, "UNSTABLE"),
+        "linear": ({"y(k-1)": 0.5, "u(k-1)": 1.0}, "H2 = H3 = 0"),
+        "huge": ({"y(k-1)": 0.5, "u(k-1)": 1e150, "u(k-1)^2": 1e150, "u(k-1)^3": 1e150},
+                 "stable"),
+    }
+    for name, (terms, said) in cases.items():
+        proc = run_cli("gfrf", str(_model_file(tmp_path / f"{name}.json", terms)),
+                       "--at", "0.1,0.2", "--json", "-")
+        assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+        assert said in proc.stderr
+        d = json.loads(proc.stdout)  # strict JSON: a NaN would not parse as a number
+        h = d["eval"][0]["h"]
+        assert all(isinstance(x, float) and np.isfinite(x) for x in h), (name, h)
+        assert d["stable"] is (name != "unstable")

@@ -1,0 +1,376 @@
+"""Faults (issue 8): recordings survive signals and kills; the online identifier survives
+its publisher stopping, restarting and changing rate, and fits that fail.
+
+Recording: ``pmsm-sysid record`` runs as a separate process while this process publishes a
+paced 500 Hz stream whose header stamps number the samples; after SIGINT/SIGTERM the bag,
+read by a stock ``rosbags`` AnyReader, must hold exactly the messages the recorder reports
+and they must be an unbroken prefix of the stream; after SIGKILL it must still be readable
+(no repair) and unbroken, missing at most about one flush interval.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+import pytest
+from rosbags.highlevel import AnyReader
+
+NS_PER_S = 1_000_000_000
+RATE_HZ = 500.0
+SIGNALS = ("thrust", "speed", "position")
+
+
+def _env(domain: int, tmp: Path) -> dict[str, str]:
+    return dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+                ROS_LOG_DIR=str(tmp / "ros_log"), PYTHONUNBUFFERED="1")
+
+
+class PacedStream:
+    """Publishes sample k (stamp k periods, values k) on ``<ns>/{thrust,speed,position}`` at
+    500 Hz from a thread; remembers when each sample went out."""
+
+    def __init__(self, ctx: Any, ns: str) -> None:
+        from rclpy.node import Node
+
+        from pmsm_sysid.rosutil import data_qos, message_class
+        from pmsm_sysid.topics import INPUT_TYPES
+
+        self.node = Node(f"paced_{uuid.uuid4().hex[:6]}", context=ctx)
+        self.pubs = {s: self.node.create_publisher(message_class(INPUT_TYPES[s]), f"{ns}/{s}",
+                                                   data_qos()) for s in SIGNALS}
+        self.sent_at: list[float] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def matched(self) -> bool:
+        return all(p.get_subscription_count() > 0 for p in self.pubs.values())
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def _run(self) -> None:
+        from pmsm_sysid.rosutil import make_sample_messages
+
+        t0 = time.monotonic()
+        k = 0
+        while not self._stop.is_set():
+            msgs = make_sample_messages(k * 2_000_000, float(k), float(k), float(k))
+            for s in SIGNALS:
+                self.pubs[s].publish(msgs[s])
+            self.sent_at.append(time.monotonic())
+            k += 1
+            delay = t0 + k / RATE_HZ - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+
+    def sent_before(self, t: float) -> int:
+        return sum(1 for s in list(self.sent_at) if s < t)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(10)
+        self.node.destroy_node()
+
+
+def _recorded(bag: Path) -> dict[str, list[int]]:
+    """topic -> sample numbers (header stamp / period), read with a stock AnyReader."""
+    out: dict[str, list[int]] = {}
+    with AnyReader([bag]) as reader:
+        for conn, _, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            stamp = msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec
+            out.setdefault(conn.topic, []).append(stamp // 2_000_000)
+    return out
+
+
+def _start_recorder(bag: Path, ns: str, env: dict[str, str]) -> subprocess.Popen[str]:
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "pmsm_sysid.cli", "record", "--out", str(bag), "--topics",
+         *(f"{ns}/{s}" for s in SIGNALS)], env=env, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    first = proc.stdout.readline()  # printed once the subscriptions exist
+    assert first.startswith("recording "), (first, proc.stderr.read() if proc.poll() else "")
+    return proc
+
+
+def _record_and_signal(ctx: Any, tmp: Path, domain: int, sig: int,
+                       seconds: float) -> tuple[subprocess.Popen[str], PacedStream, float, Path]:
+    ns = f"/t{uuid.uuid4().hex[:10]}"
+    bag = tmp / "rec"
+    recorder = _start_recorder(bag, ns, _env(domain, tmp))
+    stream = PacedStream(ctx, ns)
+    try:
+        deadline = time.monotonic() + 20
+        while not stream.matched():
+            assert time.monotonic() < deadline, "recorder never subscribed"
+            time.sleep(0.02)
+        stream.start()
+        time.sleep(seconds)
+        t_signal = time.monotonic()
+        recorder.send_signal(sig)
+        time.sleep(0.3)  # the stream runs on past the signal
+    finally:
+        stream.stop()
+    try:
+        recorder.wait(timeout=30)
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+    return recorder, stream, t_signal, bag
+
+
+def _assert_unbroken_prefix(got: dict[str, list[int]], ns: str | None = None) -> int:
+    """Every topic holds samples 0..m-1 in order (nothing lost in between); returns the
+    smallest m."""
+    assert len(got) == 3, got.keys()
+    for topic, ks in got.items():
+        assert ks == list(range(len(ks))), (topic, ks[:5], len(ks))
+    return min(len(ks) for ks in got.values())
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_record_stopped_by_a_signal_keeps_every_message_it_received(
+        ros_context: Any, ros_env: int, tmp_path: Path, sig: int) -> None:
+    recorder, stream, t_signal, bag = _record_and_signal(ros_context, tmp_path, ros_env, sig,
+                                                          1.5)
+    out, err = recorder.communicate(timeout=30)
+    assert recorder.returncode == 0, err
+    (summary,) = [ln for ln in out.splitlines() if ln.startswith("recorded ")]
+    reported = int(summary.split(": ")[1].split()[0])
+    got = _recorded(bag)
+    assert sum(len(v) for v in got.values()) == reported  # every message it received
+    m = _assert_unbroken_prefix(got)
+    # the recorder took everything sent well before the signal (delivery latency aside)
+    assert m >= stream.sent_before(t_signal - 0.5) > 300
+    assert sorted(p.name for p in bag.iterdir()) == ["metadata.yaml", "rec.db3"]
+
+
+@pytest.mark.ros
+def test_record_hard_kill_leaves_a_readable_bag_missing_at_most_a_flush(
+        ros_context: Any, ros_env: int, tmp_path: Path) -> None:
+    """SIGKILL: nothing runs at exit. The recorder commits every second (flush interval),
+    so the bag is readable as it is and lacks at most the last second or so."""
+    recorder, stream, t_kill, bag = _record_and_signal(ros_context, tmp_path, ros_env,
+                                                        signal.SIGKILL, 3.0)
+    recorder.communicate(timeout=30)
+    assert recorder.returncode == -signal.SIGKILL
+    m = _assert_unbroken_prefix(_recorded(bag))  # stock reader, no repair
+    flush_s, slack_s = 1.0, 1.0  # slack: delivery latency on a loaded machine
+    assert m >= stream.sent_before(t_kill - flush_s - slack_s) > 500
+    assert m <= stream.sent_before(t_kill + 0.1)
+
+
+# ------------------------------------------------------------------ the online identifier
+
+
+def _push(engine: Any, stamps_ns: Any, seed: int = 0) -> None:
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    for stamp in stamps_ns:
+        for s in SIGNALS:
+            engine.push(s, int(stamp), float(rng.normal()))
+
+
+def _engine() -> Any:
+    from pmsm_sysid.core.engine import EngineConfig, OnlineEngine
+
+    engine = OnlineEngine(EngineConfig(window=200, hop=100),
+                          lambda w: (w.seq, int(w.stamps_ns[-1] - w.stamps_ns[-2])))
+    engine.start()
+    return engine
+
+
+def test_engine_resumes_after_its_publisher_pauses() -> None:
+    """Stop for a while, then the same clock goes on: one gap, nothing invented, windows
+    resume once a full window has arrived again."""
+    import numpy as np
+
+    engine = _engine()
+    try:
+        period = 2_000_000
+        _push(engine, NS_PER_S + period * np.arange(1000))
+        assert engine.wait_idle(30)
+        before = engine.stats
+        time.sleep(0.3)  # the publisher is silent: nothing happens, nothing breaks
+        assert engine.stats == before and engine._worker.alive
+        _push(engine, NS_PER_S + period * (5000 + np.arange(1000)), seed=1)
+        assert engine.wait_idle(30)
+        after = engine.stats
+        assert after.samples_received == 2000 and after.samples_dropped == 0
+        assert (after.gaps, after.samples_missing) == (1, 4000)
+        assert after.windows_due - before.windows_due == 9  # (1000 - 200) / 100 + 1
+        assert after.windows_failed == 0
+    finally:
+        engine.stop()
+
+
+@pytest.mark.xfail(strict=True, reason="StampAligner drops every message stamped before the "
+                   "newest stamp it has seen: a publisher restarted on a clock from zero "
+                   "(sim time) is ignored for good, counted as out of order")
+def test_engine_resumes_after_its_publisher_restarts_its_clock() -> None:
+    import numpy as np
+
+    engine = _engine()
+    try:
+        _push(engine, NS_PER_S + 2_000_000 * np.arange(1000))
+        assert engine.wait_idle(30)
+        due = engine.stats.windows_due
+        _push(engine, 2_000_000 * np.arange(1000), seed=1)  # restarted: stamps from zero
+        assert engine.wait_idle(30)
+        assert engine.stats.samples_received == 2000
+        assert engine.stats.windows_due - due >= 8
+    finally:
+        engine.stop()
+
+
+@pytest.mark.xfail(strict=True, reason="the aligner learns the sample period once: at half "
+                   "the rate every sample is a gap (no window ever again), at twice the rate "
+                   "every other message is dropped as a duplicate (windows of decimated data)")
+@pytest.mark.parametrize("factor", [0.5, 2.0], ids=["half_rate", "double_rate"])
+def test_engine_follows_a_rate_change(factor: float) -> None:
+    import numpy as np
+
+    engine = _engine()
+    try:
+        _push(engine, NS_PER_S + 2_000_000 * np.arange(1000))
+        assert engine.wait_idle(30)
+        due = engine.stats.windows_due
+        new_period = round(2_000_000 / factor)
+        _push(engine, NS_PER_S + 2_000_000 * 1000 + new_period * np.arange(1500), seed=1)
+        assert engine.wait_idle(30)
+        stats = engine.stats
+        assert stats.samples_received == 2500 and stats.duplicates == 0
+        assert stats.windows_due - due >= 10
+        last = [r for r in engine.drain() if isinstance(r, tuple)][-1]
+        assert last[1] == new_period  # the newest window is at the new rate
+    finally:
+        engine.stop()
+
+
+class _Publisher:
+    """Publishes samples of the known system from the test thread (stamp k periods)."""
+
+    def __init__(self, ctx: Any, ns: str) -> None:
+        from rclpy.node import Node
+
+        from pmsm_sysid.rosutil import data_qos, message_class
+        from pmsm_sysid.topics import INPUT_TYPES
+
+        self.node = Node(f"pub_{uuid.uuid4().hex[:6]}", context=ctx)
+        self.pubs = {s: self.node.create_publisher(message_class(INPUT_TYPES[s]), f"{ns}/{s}",
+                                                   data_qos()) for s in SIGNALS}
+
+    def publish(self, stamp_ns: int, u: float, y: float, x: float) -> None:
+        from pmsm_sysid.rosutil import make_sample_messages
+
+        msgs = make_sample_messages(stamp_ns, u, y, x)
+        for s in SIGNALS:
+            self.pubs[s].publish(msgs[s])
+
+
+def _stream(ex: Any, ident: Any, pub: _Publisher, first_index: int, data: Any,
+            chunk: int = 100) -> None:
+    """Publish ``data`` (u, y, x rows) chunk by chunk; after each chunk spin until the
+    identifier has every message and the fitting thread is idle (no window skipped)."""
+    for a in range(0, len(data), chunk):
+        for k, (u, y, x) in enumerate(data[a : a + chunk], start=first_index + a):
+            pub.publish(k * 2_000_000, u, y, x)
+        want = ident.engine.stats.messages + 3 * len(data[a : a + chunk])
+        deadline = time.monotonic() + 30
+        while ident.engine.stats.messages < want:
+            assert time.monotonic() < deadline, "identifier did not receive the chunk"
+            ex.spin_once(timeout_sec=0.01)
+        assert ident.engine.wait_idle(30)
+        ex.spin_once(timeout_sec=0.01)
+
+
+@pytest.mark.ros
+def test_identifier_node_survives_failing_fits_a_silent_and_a_restarted_publisher(
+        ros_context: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    import numpy as np
+    from narx_systems import QUADRATIC, simulate, white_input
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+
+    import pmsm_sysid.core.tracker as tracker
+    from pmsm_sysid.core.errors import IdentificationError
+    from pmsm_sysid.nodes.identifier_node import IdentifierNode
+    from pmsm_sysid.nodes.monitor import MonitorNode
+
+    real, calls = tracker.fit_narx, [0]
+
+    def flaky(*args: Any, **kw: Any) -> Any:  # the 2nd fit hits a bug, the 3rd bad data
+        calls[0] += 1
+        if calls[0] == 2:
+            raise RuntimeError("injected fault inside the core")
+        if calls[0] == 3:
+            raise IdentificationError("injected identification failure")
+        return real(*args, **kw)
+
+    monkeypatch.setattr(tracker, "fit_narx", flaky)
+    u = white_input(2400, seed=3)
+    y = simulate(QUADRATIC, u, noise_std=1e-3, seed=3)
+    rows = np.stack([u, y, np.cumsum(y) / RATE_HZ], axis=1).tolist()
+    ns = f"/t{uuid.uuid4().hex[:10]}"
+    params = [Parameter(k, value=v) for k, v in {
+        "outputs": ["speed"], "window": 400, "hop": 200, "speed.ny": 2, "speed.nu": 2,
+        "speed.terms": 5, "method": "iofr", "publish_period_s": 0.02}.items()]
+    ident = IdentifierNode(context=ros_context, namespace=ns, parameter_overrides=params)
+    mon = MonitorNode(context=ros_context, namespace=ns)
+    ex = SingleThreadedExecutor(context=ros_context)
+    nodes = [ident, mon]
+    for n in nodes:
+        ex.add_node(n)
+    try:
+        first = _Publisher(ros_context, ns)
+        ex.add_node(first.node)
+        deadline = time.monotonic() + 20
+        while not all(p.get_subscription_count() >= 2 for p in first.pubs.values()):
+            assert time.monotonic() < deadline, "no match"
+            ex.spin_once(timeout_sec=0.05)
+        _stream(ex, ident, first, 500, rows[:1200])  # windows end at sample 999..1599: 4
+        s = ident.summary()
+        assert s["windows_due"] == 4 and s["windows_failed"] == 1 and s["windows_skipped"] == 0
+        assert ident.models_published == 2
+        assert any("RuntimeError: injected fault inside the core" in e for e in s["errors"])
+        assert any("IdentificationError: injected identification failure" in e
+                   for e in s["errors"])
+        # the publisher goes away: the node keeps spinning, the monitor reports the silence
+        ex.remove_node(first.node)
+        first.node.destroy_node()
+        quiet_from = time.monotonic()
+        while time.monotonic() - quiet_from < 0.6:
+            ex.spin_once(timeout_sec=0.05)
+        ages = [t["age_s"] for t in mon.snapshot()["topics"] if t["topic"].startswith(ns)
+                and t["count"]]
+        assert len(ages) == 3 and min(ages) >= 0.5
+        # a new publisher takes over 10 s later on the same clock
+        second = _Publisher(ros_context, ns)
+        ex.add_node(second.node)
+        while not all(p.get_subscription_count() >= 2 for p in second.pubs.values()):
+            assert time.monotonic() < deadline + 20, "no match"
+            ex.spin_once(timeout_sec=0.05)
+        _stream(ex, ident, second, 500 + 1200 + 5000, rows[1200:])
+        s = ident.summary()
+        assert (s["gaps"], s["samples_missing"], s["samples_received"]) == (1, 5000, 2400)
+        assert s["windows_due"] == 8 and ident.models_published == 6
+        last = s["models"]["speed"]
+        assert last["window"]["start_stamp"] >= (500 + 1200 + 5000) * 0.002  # after the restart
+        got = {t["name"]: t["estimate"] for t in last["terms"]}
+        for name, value in QUADRATIC.items():
+            assert got[name] == pytest.approx(value, rel=0.02), name
+    finally:
+        ex.shutdown()
+        for n in nodes:
+            n.destroy_node()
