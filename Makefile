@@ -11,6 +11,10 @@ DEMO_DIR ?= demo_out
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export ROS_DOMAIN_ID ?= 42
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
+# One BLAS thread per process: the fits are small and the test workers already use both cores.
+export OPENBLAS_NUM_THREADS ?= 1
+export OMP_NUM_THREADS ?= 1
+export MKL_NUM_THREADS ?= 1
 
 .PHONY: venv demo test lint typecheck bags bench clean
 

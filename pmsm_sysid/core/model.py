@@ -101,7 +101,8 @@ class Structure:
 
     def __post_init__(self) -> None:
         if self.ny < 0 or self.nu < 0 or self.ny + self.nu == 0:
-            raise IdentificationError(f"need ny >= 0, nu >= 0, ny + nu > 0 (got {self.ny}, {self.nu})")
+            raise IdentificationError(
+                f"need ny >= 0, nu >= 0, ny + nu > 0 (got {self.ny}, {self.nu})")
         if not 1 <= self.degree <= 3:
             raise IdentificationError(f"degree must be 1, 2 or 3 (got {self.degree})")
         if self.delay < 1:

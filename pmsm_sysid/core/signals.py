@@ -33,7 +33,8 @@ class Recording:
         n = len(self.t)
         for name in ("thrust", "speed", "position"):
             if len(getattr(self, name)) != n:
-                raise DataError(f"recording: '{name}' has {len(getattr(self, name))} samples, t has {n}")
+                got = len(getattr(self, name))
+                raise DataError(f"recording: '{name}' has {got} samples, t has {n}")
         if not np.isfinite(self.sample_rate_hz) or self.sample_rate_hz <= 0:
             raise DataError(f"recording: sample rate must be positive, got {self.sample_rate_hz}")
 
@@ -88,4 +89,5 @@ def check_finite(rec: Recording) -> None:
         bad = ~np.isfinite(arr)
         if bad.any():
             k = int(np.argmax(bad))
-            raise DataError(f"'{name}' has {int(bad.sum())} non-finite samples (first at index {k})")
+            raise DataError(
+                f"'{name}' has {int(bad.sum())} non-finite samples (first at index {k})")
