@@ -261,7 +261,7 @@ def _prune(fit: Fit, data: EquationData, held: list[Any], n_tests: float,
 
 def _rank_dict(s: Any) -> dict[str, Any]:
     return {"candidate": s.effect.label(), "name": s.effect.name, "err": s.err,
-            "share": s.share, "significance": capped(s.test.corrected_log10_p(s.n_tests))}
+            "share": s.share, "significance": capped(-s.significance)}
 
 
 def _method(segs: Segments, opts: DiagnoseOptions, n_tests: float,

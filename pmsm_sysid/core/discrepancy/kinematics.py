@@ -146,7 +146,6 @@ class EquationData:
     a_raw: FloatArray
     cmd: FloatArray
     force: FloatArray
-    residual_raw: FloatArray
     y: FloatArray
     t: FloatArray
     period: float
@@ -246,7 +245,7 @@ def equation_data(plant: Plant, rec: Recording, filt: FilterSpec | None = None,
                                                       spec.decimation])
     return EquationData(x=xs, v=vs, v_lo=v_lo, v_hi=v_hi, a=as_, v_raw=v, a_raw=a, cmd=cmd,
                         force=force,
-                        residual_raw=resid, y=y, t=t, period=T, mode=mode,
+                        y=y, t=t, period=T, mode=mode,
                         filt=spec, sos=sos, speed_noise_mps=noise,
                         sign_smoothing_mps=sign_width(noise))
 

@@ -40,8 +40,6 @@ FloatArray = NDArray[np.float64]
 
 FIXED = ("force_offset", "coulomb_friction", "viscous_error", "mass_error", "spring",
          "thrust_lag")
-GRIDDED = ("cogging", "thrust_ripple", "stribeck_friction")
-EFFECT_NAMES = FIXED + GRIDDED + ("transport_delay",)
 
 OVERSAMPLE = 4  # grid points per independent wavenumber / Stribeck velocity
 MAX_CYCLE_HZ_FACTOR = 1.0  # a position period must pass the filter at the median speed

@@ -39,7 +39,7 @@ def where_table(data: EquationData, ranking: list[Step]) -> list[AxisFinding]:
     out = []
     for f in found:
         if f.axis == "position" and cog is not None:
-            sig = -cog.test.corrected_log10_p(cog.n_tests)
+            sig = cog.significance
             extra = {"period_m": cog.effect.pitch_m, "period_share": cog.share,
                      "period_significance": sig, "bins_share": f.share,
                      "bins_significance": f.significance}
