@@ -38,9 +38,11 @@ test: $(STAMP) lint
 
 bags: $(STAMP)
 	bash scripts/make_bags.sh
+	bash scripts/make_concealed_bags.sh
 
 bench: $(STAMP)
 	$(PY) bench/ofr_bench.py
+	$(PY) bench/gfrf_bench.py
 
 clean:
 	rm -rf $(VENV) $(DEMO_DIR) .pytest_cache .mypy_cache .ruff_cache *.egg-info
