@@ -13,8 +13,8 @@
   not counted as excitation: it did not drive the plant. If that is below nu the fit is
   still made (it is the paper's single-tone protocol) but a warning says so: input-lag terms
   are then not unique and the model only describes responses to inputs like this one.
-* Values so large that the degree-d regressors overflow float64 (sums of squares of x^d
-  beyond 1e300) -> DataError naming the signal: rescale it.
+* Values so large that the selection sums overflow float64 ((p^T y)^2 ~ n^2 x^(2d+2) for a
+  degree-d regressor p, beyond 1e300) -> DataError naming the signal: rescale it.
 * A signal that sits at its extreme value in >= 1 % of the samples (and takes more than 16
   distinct values, so two-level inputs are exempt) -> a warning: saturated or clipped data
   are not what drove, or came out of, the plant.
@@ -70,12 +70,15 @@ def _finite(name: str, x: FloatArray) -> None:
         )
 
 
-def _magnitude(name: str, x: FloatArray, degree: int) -> None:
-    """DataError if the degree-``degree`` regressors of x would overflow float64."""
-    peak = float(np.max(np.abs(x))) if x.size else 0.0
-    if peak > 0 and 2 * degree * np.log10(peak) + np.log10(x.size) > OVERFLOW_LOG10:
+def _magnitude(signals: dict[str, FloatArray], degree: int) -> None:
+    """DataError if the selection sums would overflow float64: (p^T y)^2 with p a degree-d
+    regressor reaches n^2 x^(2d+2) for signals of magnitude x."""
+    peaks = {k: float(np.max(np.abs(v))) if v.size else 0.0 for k, v in signals.items()}
+    name = max(peaks, key=lambda k: peaks[k])
+    peak, n = peaks[name], max(v.size for v in signals.values())
+    if peak > 0 and (2 * degree + 2) * np.log10(peak) + 2 * np.log10(n) > OVERFLOW_LOG10:
         raise DataError(f"'{name}' reaches {peak:.3g}: too large for a degree-{degree} model "
-                        "(its regressors overflow float64); rescale the signal")
+                        "(its regressor sums overflow float64); rescale the signal")
 
 
 def saturation(name: str, x: FloatArray) -> str | None:
@@ -155,8 +158,7 @@ def validate_fit_data(
                         f"(got {y.shape} and {u.shape})")
     _finite(output_name, y)
     _finite(input_name, u)
-    _magnitude(output_name, y, structure.degree)
-    _magnitude(input_name, u, structure.degree)
+    _magnitude({output_name: y, input_name: u}, structure.degree)
     n, lag = len(y), structure.max_lag
     need = lag + 2 * n_params
     if n < need:

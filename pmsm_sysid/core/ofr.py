@@ -274,6 +274,9 @@ class LsFit:
 def least_squares(x: FloatArray, y: FloatArray) -> LsFit:
     """theta by Householder QR; std = sqrt(sigma^2 diag((X^T X)^-1)), sigma^2 = SSE/(N-p)."""
     n, p = x.shape
+    if p == 0:
+        raise IdentificationError("no candidate term is usable on these data: every candidate "
+                                  "is zero or linearly dependent")
     if n <= p:
         raise IdentificationError(f"{p} terms need more than {p} samples (got {n})")
     qmat, rmat = np.linalg.qr(x)
