@@ -10,6 +10,7 @@ and they must be an unbroken prefix of the stream; after SIGKILL it must still b
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import subprocess
@@ -374,3 +375,82 @@ def test_identifier_node_survives_failing_fits_a_silent_and_a_restarted_publishe
         ex.shutdown()
         for n in nodes:
             n.destroy_node()
+
+
+@pytest.mark.ros
+def test_identifier_publishes_diverged_models_as_strict_json(ros_context: Any) -> None:
+    """A model whose free run diverges has NMSE inf and R2 -inf: published as null (as
+    ``identify`` writes it), not as a ValueError that stops the node's executor."""
+    import dataclasses
+    import json
+
+    import numpy as np
+    from diagnostic_msgs.msg import DiagnosticArray
+    from narx_systems import QUADRATIC, simulate, white_input
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from std_msgs.msg import String
+
+    from pmsm_sysid.core.engine import EngineConfig, OnlineEngine
+    from pmsm_sysid.core.identify import FitConfig
+    from pmsm_sysid.core.model import Structure
+    from pmsm_sysid.core.tracker import OutputConfig, TrackerConfig, WindowTracker
+    from pmsm_sysid.nodes.identifier_node import IdentifierNode
+    from pmsm_sysid.topics import MODEL_TOPIC, VALIDATION_TOPIC
+
+    tracker = WindowTracker(TrackerConfig(outputs=(OutputConfig("speed", FitConfig(
+        structure=Structure(ny=2, nu=2, degree=2), n_terms=5)),), window=400, hop=200))
+    engine = OnlineEngine(EngineConfig(window=400, hop=200, history=tracker.history),
+                          tracker.process)
+    engine.start()
+    u = white_input(1400, seed=5)
+    y = simulate(QUADRATIC, u, noise_std=1e-3, seed=5)
+    for k in range(1400):
+        engine.push_sample(NS_PER_S + k * 2_000_000, (u[k], y[k], 0.0))
+    assert engine.wait_idle(30)
+    engine.stop()
+    result = next(r for r in engine.drain() if getattr(r, "validations", ()))
+    model = json.loads(json.dumps(result.models[0]))
+    model["validation"]["estimation"].update(nmse=math.inf, nrmse=math.inf, r2=-math.inf,
+                                             free_run_diverged=True)
+    val = json.loads(json.dumps(result.validations[0]))
+    val["free_run"].update(nmse=math.inf, nrmse=math.inf, r2=-math.inf, diverged=True)
+    val["pass"] = False
+    diverged = dataclasses.replace(result, models=(model,), validations=(val,))
+
+    ident = IdentifierNode(context=ros_context, namespace=f"/t{uuid.uuid4().hex[:10]}")
+    listener = Node(f"listen_{uuid.uuid4().hex[:6]}", context=ros_context)
+    got: dict[str, list[Any]] = {"model": [], "validation": []}
+    listener.create_subscription(String, MODEL_TOPIC, lambda m: got["model"].append(m.data), 10)
+    listener.create_subscription(DiagnosticArray, VALIDATION_TOPIC,
+                                 lambda m: got["validation"].append(m), 10)
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(ident)
+    ex.add_node(listener)
+    try:
+        deadline = time.monotonic() + 20
+        while ident._model_pub.get_subscription_count() < 1 or \
+                ident._val_pub.get_subscription_count() < 1:
+            assert time.monotonic() < deadline, "no match"
+            ex.spin_once(timeout_sec=0.05)
+        ident._publish(diverged)
+        while not (got["model"] and got["validation"]):
+            assert time.monotonic() < deadline, "nothing published"
+            ex.spin_once(timeout_sec=0.05)
+
+        def strict(constant: str) -> None:
+            raise AssertionError(f"non-JSON constant {constant}")
+
+        published = json.loads(got["model"][0], parse_constant=strict)
+        assert published["validation"]["estimation"]["nmse"] is None
+        assert published["validation"]["estimation"]["r2"] is None
+        assert np.isfinite([t["estimate"] for t in published["terms"]]).all()
+        values = {kv.key: kv.value for kv in got["validation"][0].status[0].values}
+        assert values["nrmse"] == "null" and values["r2"] == "null"
+        for text in values.values():
+            json.loads(text, parse_constant=strict) if text[:1] in "[{-0123456789nt" else None
+        ex.spin_once(timeout_sec=0.05)  # and the node spins on
+    finally:
+        ex.shutdown()
+        ident.destroy_node()
+        listener.destroy_node()

@@ -29,6 +29,7 @@ from std_msgs.msg import String
 
 from ..core.engine import EngineConfig, OnlineEngine, WindowError
 from ..core.errors import DataError
+from ..core.gfrf_analysis import json_safe
 from ..core.tracker import WindowResult, WindowTracker, tracker_config
 from ..rosutil import data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
 from ..topics import (
@@ -59,7 +60,7 @@ def status(name: str, level: bytes, message: str, hardware_id: str,
     """A DiagnosticStatus with ``values`` as strings (floats with full precision)."""
     return DiagnosticStatus(
         name=name, level=level, message=message, hardware_id=hardware_id,
-        values=[KeyValue(key=k, value=v if isinstance(v, str) else json.dumps(v))
+        values=[KeyValue(key=k, value=v if isinstance(v, str) else json.dumps(json_safe(v)))
                 for k, v in values.items()])
 
 
@@ -139,7 +140,8 @@ class IdentifierNode(Node):
         for e in r.errors:
             self._note_error(f"{e['model_id']}: {e['error']}")
         for model in r.models:
-            self._model_pub.publish(String(data=json.dumps(model, allow_nan=False)))
+            # a diverged free run has NMSE inf: strict JSON carries it as null (as identify)
+            self._model_pub.publish(String(data=json.dumps(json_safe(model), allow_nan=False)))
             self.last["models"][model["output"]] = model
             self.models_published += 1
         stamp = stamp_from_ns(round(r.end_stamp * 1e9))
