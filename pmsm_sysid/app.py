@@ -8,9 +8,10 @@ importable classes, so a user's own process can compose them the same way.
 
 Clock: with ``clock="wall"`` the sim node paces itself to real time. With ``clock="sim"``
 and the identifier in the same process, the pipeline steps the simulator itself, ``burst``
-samples at a time, whenever the identifier has taken what was published (back-pressure), so
-the run is as fast as identification allows and loses nothing; without an identifier here,
-the sim node runs at ``rate`` x real time on its own timer.
+samples at a time, whenever the identifier has taken what was published and no window waits
+for a fit (back-pressure), so the run is as fast as identification allows, loses nothing and
+skips no window (deterministic: same plant and seed, same models); without an identifier
+here, the sim node runs at ``rate`` x real time on its own timer.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from .topics import DEFAULT_NAMESPACE
 
 NODES = ("sim", "identifier", "gfrf")
 BACKLOG = 200  # samples the sim may run ahead of the identifier under back-pressure
+SETTLE_S = 5.0  # after the sim's last sample, how long the identifier may still take
 
 
 def parse_nodes(text: str | Sequence[str]) -> tuple[str, ...]:
@@ -82,31 +84,44 @@ class Pipeline:
 
     def run(self, duration_s: float | None = None,
             until: Callable[[], bool] | None = None) -> None:
-        """Spin until ``until()``, the stop event, or ``duration_s``: simulated seconds when
-        this pipeline steps the simulator, wall-clock seconds otherwise (None = no limit)."""
+        """Spin until ``until()``, the stop event, or ``duration_s`` more seconds of data:
+        with the sim node here, until it has published that many more samples (it stops
+        there, ``max_samples``) and the identifier here has taken them; without it, for
+        ``duration_s`` wall-clock seconds. None = no limit."""
         limit = None
-        if duration_s is not None and self.stepped:
-            limit = round(duration_s * self.sim.fs)
+        if duration_s is not None and self.sim is not None:
+            limit = self.sim.published + round(duration_s * self.sim.fs)
+            if not self.stepped:
+                self.sim.set_parameters([Parameter(  # type: ignore[no-untyped-call]
+                    "max_samples", value=limit)])
             duration_s = None
         deadline = None if duration_s is None else time.monotonic() + duration_s
+        settle = 0.0
         while not self.stop.is_set() and self.context.ok():
             if until is not None and until():
                 return
             if deadline is not None and time.monotonic() >= deadline:
                 return
+            if limit is not None and self.sim.published >= limit and self._caught_up():
+                return
+            if limit is not None and self.sim.published >= limit:
+                settle = settle or time.monotonic() + SETTLE_S
+                if time.monotonic() > settle:
+                    return  # what has not arrived by now is counted missing, not awaited
             if self.stepped:
-                if limit is not None and self.sim.published >= limit and self._caught_up():
-                    return
                 self._step_sim(limit)
             self.executor.spin_once(timeout_sec=0.0 if self.stepped else 0.05)
 
     def _caught_up(self) -> bool:
-        return bool(self.identifier.engine.samples_received >= self.sim.published)
+        ident = self.identifier
+        return ident is None or bool(ident.engine.samples_received >= self.sim.published)
 
     def _step_sim(self, limit: int | None) -> None:
-        sim, ident = self.sim, self.identifier
+        """Publish the next burst unless the identifier (or the GFRF node) is behind."""
+        sim, ident, gfrf = self.sim, self.identifier, self.gfrf
         backlog = sim.published - ident.engine.samples_received
-        if backlog < BACKLOG and (limit is None or sim.published < limit):
+        busy = ident.engine.windows_waiting > 0 or (gfrf is not None and len(gfrf.queue) > 0)
+        if backlog < BACKLOG and not busy and (limit is None or sim.published < limit):
             burst = int(sim.values["burst"])
             sim.step(burst if limit is None else min(burst, limit - sim.published))
 
@@ -121,11 +136,12 @@ class Pipeline:
         ident.publish_results()
         if self.gfrf is not None:
             t_end = time.monotonic() + timeout_s
-            want = ident.models_published
+            want, g = ident.models_published, self.gfrf
             while time.monotonic() < t_end and self.context.ok():
                 self.executor.spin_once(timeout_sec=0.02)
-                if self.gfrf.received >= want and self.gfrf.worker.stats.processed >= want:
-                    self.gfrf.publish_results()
+                done = g.worker.stats.processed + g.queue.skipped
+                if g.received >= want and done >= g.received:
+                    g.publish_results()
                     break
         self.executor.spin_once(timeout_sec=0.05)
 
@@ -154,6 +170,22 @@ def _make_node(name: str, ctx: Context, opts: dict[str, Any]) -> Node:
     return GfrfNode(context=ctx, parameter_overrides=overrides(params))
 
 
+def _make_checked(name: str, ctx: Context, opts: dict[str, Any]) -> Node:
+    """``_make_node`` with parameter problems turned into one clear SysIdError."""
+    from rclpy.exceptions import ParameterException
+
+    try:
+        node = _make_node(name, ctx, opts)
+    except ParameterException as exc:
+        raise SysIdError(f"{name} node: {exc}") from exc
+    given = opts.get(f"{name}_params") or {}
+    unknown = sorted(k for k in given if not node.has_parameter(k))
+    if unknown:
+        node.destroy_node()  # type: ignore[no-untyped-call]
+        raise SysIdError(f"{name} node has no parameter(s) {', '.join(unknown)}")
+    return node
+
+
 @contextmanager
 def build_pipeline(
     nodes: Sequence[str] = NODES, *, plant: Plant | None = None,
@@ -178,7 +210,7 @@ def build_pipeline(
         pipe = Pipeline(ctx, executor, made, clock)
         try:
             for name in names:
-                made[name] = _make_node(name, ctx, opts)
+                made[name] = _make_checked(name, ctx, opts)
                 executor.add_node(made[name])
             if pipe.stepped:
                 pipe.sim._timer.cancel()  # stepped by the pipeline (back-pressure)

@@ -176,6 +176,11 @@ class OnlineEngine(Generic[R]):
         return False
 
     @property
+    def windows_waiting(self) -> int:
+        """Windows queued for the fitting thread (not counting the one being fitted)."""
+        return len(self._queue)
+
+    @property
     def samples_received(self) -> int:
         """Aligned samples so far (cheap; for back-pressure loops)."""
         return self.aligner.samples_emitted

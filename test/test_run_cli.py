@@ -1,0 +1,120 @@
+"""``pmsm-sysid run`` as a user runs it: summary JSON, clean SIGTERM, one-line errors."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytestmark = pytest.mark.ros
+CLI = [sys.executable, "-m", "pmsm_sysid.cli"]
+KEYS = {"samples_received", "samples_dropped", "windows_fitted", "windows_skipped",
+        "last_model", "last_ridges", "last_validation", "change_events"}
+
+
+def _env(ros_env: int, tmp_path: Path) -> dict[str, str]:
+    return {**os.environ, "ROS_DOMAIN_ID": str(ros_env),
+            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "ROS_LOG_DIR": str(tmp_path / "log")}
+
+
+@pytest.mark.slow
+def test_run_for_five_seconds_prints_the_summary(ros_env: int, tmp_path: Path) -> None:
+    proc = subprocess.run([*CLI, "run", "--duration", "5", "--json", "-"], env=_env(
+        ros_env, tmp_path), capture_output=True, text=True, timeout=180)
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    assert set(s) >= KEYS
+    assert s["nodes"] == ["sim", "identifier", "gfrf"] and s["clock"] == "wall"
+    # 5 s at 500 Hz, minus what the sim had not yet published when the time was up
+    assert 2000 <= s["samples_published"] <= 2600
+    assert s["samples_received"] == s["samples_published"]
+    assert s["samples_dropped"] == 0 and s["samples_missing"] == 0
+    assert s["windows_fitted"] + s["windows_skipped"] == s["windows_due"] >= 4
+    m = s["last_model"]
+    assert m["output"] == "speed" and m["input"] == "thrust" and m["terms"]
+    assert {"structure", "validation", "window", "fit_time_ms", "model_id"} <= set(m)
+    assert s["last_ridges"]["output"] == "speed"
+    assert {"h1", "h2", "poles", "stable"} <= set(s["last_ridges"])
+    assert "pmsm-sysid run:" in proc.stderr
+
+
+@pytest.mark.slow
+def test_sigterm_mid_run_finalises_the_recording(ros_env: int, tmp_path: Path) -> None:
+    from rosbags.highlevel import AnyReader
+
+    from pmsm_sysid.bagio import read_recording
+
+    bag, out = tmp_path / "live", tmp_path / "run.json"
+    proc = subprocess.Popen([*CLI, "run", "--record", str(bag), "--json", str(out)],
+                            env=_env(ros_env, tmp_path), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not _recorded(bag) > 3000:
+            time.sleep(0.5)
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err
+    s = json.loads(out.read_text())
+    assert s["stopped_by_signal"] is True and set(s) >= KEYS
+    with AnyReader([bag]) as reader:  # plain rosbags, no project code
+        counts: dict[str, int] = {}
+        for conn, _, _ in reader.messages():
+            counts[conn.topic] = counts.get(conn.topic, 0) + 1
+    assert sum(counts.values()) == s["recorded_messages"]
+    rec = read_recording(bag)
+    n = len(rec.recording)
+    assert n >= 1000 and n == counts["/pmsm/thrust"] == counts["/pmsm/speed"]
+    assert counts.get("/pmsm_sysid/model", 0) == s["models_published"] >= 2
+
+
+def _recorded(bag: Path) -> int:
+    meta = bag / "metadata.yaml"
+    if not meta.exists():
+        return 0
+    import yaml
+
+    try:
+        info: Any = yaml.safe_load(meta.read_text())
+    except yaml.YAMLError:
+        return 0
+    return int(info["rosbag2_bagfile_information"]["message_count"])
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["--duration", "-1"], "--duration must be > 0"),
+    (["--nodes", "sim,motor"], "--nodes"),
+    (["--plant", "no/such/plant.yaml"], "plant"),
+    (["--rate", "2"], "--rate applies to --clock sim"),
+    (["--set", "identifier.windw=5", "--duration", "1"], "no parameter"),
+    (["--set", "cogging.enabled=true"], "NODE.PARAM=VALUE"),
+])
+def test_bad_input_is_one_line_and_exit_2(ros_env: int, tmp_path: Path, argv: list[str],
+                                          match: str) -> None:
+    proc = subprocess.run([*CLI, "run", *argv], env=_env(ros_env, tmp_path),
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and match in lines[0] and "Traceback" not in proc.stderr
+
+
+def test_existing_record_path_is_refused(ros_env: int, tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    proc = subprocess.run([*CLI, "run", "--record", str(bag), "--duration", "1"],
+                          env=_env(ros_env, tmp_path), capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 2 and "exists" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
