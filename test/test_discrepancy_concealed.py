@@ -48,6 +48,8 @@ def _improves(result: DiagnoseResult, factor: float = 0.9) -> None:
         oe = f.get("output_error")
         if oe:
             assert oe["nrmse_after"] < oe["nrmse_before"], (seg, oe)
+            assert oe["verdict"] == "better" or any(
+                n.startswith(f"speed replay on {seg}") for n in result.notes), (seg, oe)
 
 
 def _check_cogging(e: FoundEffect, amplitude: float, pitch: float) -> None:

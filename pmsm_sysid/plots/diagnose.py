@@ -101,11 +101,14 @@ def speed_replay(result: DiagnoseResult, segment: str = "validation",
             data[key] = np.asarray(line.get_ydata())
     ax.set_xlabel("time (s)")
     ax.set_ylabel("speed (m/s)")
-    ax.set_title(f"speed replay from the measured state ({segment} data)")
+    oe = (result.fit.get(segment) or {}).get("output_error") or {}
+    every = f" every {oe['horizon_s']:.3g} s" if "horizon_s" in oe else ""
+    ax.set_title(f"speed replay from the measured state{every} ({segment} data)")
     ax.legend(loc="upper right")
     return Plot(fig, "diagnose_speed_replay",
                 "Recorded thrust replayed through the nominal (before) and corrected (after) "
-                "plants, restarted from the measured state every horizon.", data)
+                "plants, restarted from the measured state every horizon (short enough "
+                "that position-periodic forces are evaluated where they act).", data)
 
 
 @styled

@@ -40,7 +40,7 @@ from .library import Effect
 from .modelling import Alternative, Model, confirmed_model
 from .result import Curves, DiagnoseResult, FoundEffect, capped
 from .select import ALPHA, MAX_EFFECTS, MIN_SHARE, Candidates, forward_select, score_step
-from .showfit import fit_table, scan_unexplained, where_table
+from .showfit import fit_table, replay_notes, scan_unexplained, where_table
 from .stats import ar_whitener, lstsq, whiten
 from .translate import corrected_plant, effect_params
 
@@ -221,6 +221,7 @@ def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
     est_plant, _ = _correct(plant, [(e.name, effect_params(model.fit, k, plant)[0])
                                     for k, e in enumerate(model.fit.effects)])
     table, replays = fit_table(plant, est_plant, model.fit, segs, opts.replay)
+    notes += replay_notes(table, [e.name for e in model.fit.effects])
     notes += [f"{e.label()} was significant on the estimation data but not confirmed on "
               "held-out data; it is not reported" for e in dropped]
     method = _method(segs, opts, n_tests, validate is not None)

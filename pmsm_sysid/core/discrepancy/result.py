@@ -153,8 +153,12 @@ def _fit_line(seg: str, f: dict[str, Any]) -> str:
     text = (f"{seg}: force NRMSE {f['nrmse_before']:.4f} -> {f['nrmse_after']:.4f}")
     oe = f.get("output_error")
     if oe:
-        text += (f"; speed replay NRMSE ({oe['horizon_s']:g} s horizons) "
+        text += (f"; speed replay NRMSE ({oe['horizon_s']:.3g} s horizons) "
                  f"{oe['nrmse_before']:.4f} -> {oe['nrmse_after']:.4f}")
+        verdict = oe.get("verdict")
+        if verdict and verdict != "same":
+            z = oe.get("z")
+            text += f" ({verdict}" + (f", z={z:.1f})" if z is not None else ")")
     return text
 
 

@@ -7,7 +7,10 @@
   explains a significant share becomes an ``unexplained`` entry saying where it lives.
 * ``fit_table``: force (equation-error) NRMSE before/after, the Billings-Voon tests (seed
   Eq. 13) on the residual prewhitened by the final model's AR filter (the same filter before
-  and after, so only the model changes), and the short-horizon speed replay (output error).
+  and after, so only the model changes), and the short-horizon speed replay (output error,
+  :mod:`.resim`: horizon chosen so that position-periodic forces are evaluated where they
+  act, and a verdict -- ``replay_notes`` says so where the replay cannot see the
+  correction).
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from ..validation import correlation_tests
 from .estimate import Fit, contributions, design
 from .kinematics import EquationData
 from .locate import AxisFinding, scan_axes
-from .resim import replay
+from .resim import Z_VERDICT, choose_horizon, compare
 from .result import FoundEffect
 from .select import Step
 from .stats import ar_whitener, nrmse, whiten
@@ -83,17 +86,45 @@ def _segment_fit(fit: Fit, d: EquationData) -> dict[str, Any]:
 
 def fit_table(plant: Plant, corrected: Plant, fit: Fit, segs: Any,
               do_replay: bool) -> tuple[dict[str, Any], dict[str, dict[str, FloatArray]]]:
-    """The contract's ``fit`` block (plus tests and output error) and replay series."""
+    """The contract's ``fit`` block (plus tests and output error) and replay series.
+
+    The replay horizon is chosen once, on the estimation recording (:func:`.resim.
+    choose_horizon`), and kept for the held-out data so both rows measure the same thing.
+    """
     table: dict[str, Any] = {}
     replays: dict[str, dict[str, FloatArray]] = {}
+    horizon = choose_horizon((plant, corrected), segs.recs["estimation"]) if do_replay \
+        else None
     for name, d in (("estimation", segs.est), ("validation", segs.val)):
         row = _segment_fit(fit, d)
-        if do_replay:
+        if horizon is not None:
             rec = segs.recs[name]
-            before, after = replay(plant, rec), replay(corrected, rec)
-            row["output_error"] = {"signal": "speed", "horizon_s": before.horizon_s,
-                                   "nrmse_before": before.nrmse, "nrmse_after": after.nrmse}
-            replays[name] = {"t": rec.t, "measured": rec.speed, "before": before.speed,
-                             "after": after.speed}
+            cmp = compare(plant, corrected, rec, horizon)
+            row["output_error"] = cmp.to_dict()
+            replays[name] = {"t": rec.t, "measured": rec.speed, "before": cmp.before.speed,
+                             "after": cmp.after.speed}
         table[name] = row
     return table, replays
+
+
+def replay_notes(table: dict[str, Any], named: list[str]) -> list[str]:
+    """Say so where the speed replay does not show the correction (instead of printing a
+    worse or unchanged number without comment)."""
+    out = []
+    what = ", ".join(named) or "the correction"
+    for seg in ("estimation", "validation"):
+        oe = (table.get(seg) or {}).get("output_error")
+        if not oe or oe["verdict"] in ("better", "same"):
+            continue
+        hz = oe["horizon"]
+        z = "n/a" if oe["z"] is None else f"{oe['z']:.1f}"
+        head = (f"speed replay on {seg} data ({oe['horizon_s']:.3g} s horizons; "
+                f"{hz['reason']}): ")
+        if oe["verdict"] == "worse":
+            out.append(head + f"the corrected plant replays worse (z = {z}); the replay does "
+                       f"not support {what} here -- the force fit and the held-out test are "
+                       "the evidence")
+        else:
+            out.append(head + f"the change is within the replay's noise (|z| = {z} < "
+                       f"{Z_VERDICT}): the replay cannot see {what} at this noise level")
+    return out
