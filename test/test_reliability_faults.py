@@ -10,6 +10,7 @@ and they must be an unbroken prefix of the stream; after SIGKILL it must still b
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import signal
@@ -297,6 +298,7 @@ def _stream(ex: Any, ident: Any, pub: _Publisher, first_index: int, data: Any,
 
 
 @pytest.mark.ros
+@pytest.mark.slow
 def test_identifier_node_survives_failing_fits_a_silent_and_a_restarted_publisher(
         ros_context: Any, monkeypatch: pytest.MonkeyPatch) -> None:
     import numpy as np
@@ -454,3 +456,69 @@ def test_identifier_publishes_diverged_models_as_strict_json(ros_context: Any) -
         ex.shutdown()
         ident.destroy_node()
         listener.destroy_node()
+
+
+# --------------------------------------------------------------------- run --record, killed
+
+
+def _flushed(bag: Path) -> int:
+    """Messages the recorder has committed: metadata.yaml is rewritten at every flush."""
+    import yaml
+
+    try:
+        info: Any = yaml.safe_load((bag / "metadata.yaml").read_text())
+        return int(info["rosbag2_bagfile_information"]["message_count"])
+    except (OSError, yaml.YAMLError, KeyError, TypeError):
+        return 0
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL], ids=["SIGINT", "SIGKILL"])
+def test_run_record_interrupted_or_killed(ros_env: int, tmp_path: Path, sig: int) -> None:
+    """``run --record``: Ctrl-C finalises the bag with every message recorded (the summary
+    says how many); a hard kill leaves a bag a stock reader opens as it is, holding at least
+    everything flushed before the kill, the input topics unbroken from their start.
+    (SIGTERM: ``test/test_run_cli.py``.)"""
+    import json
+
+    bag, out = tmp_path / "live", tmp_path / "run.json"
+    proc = subprocess.Popen([sys.executable, "-m", "pmsm_sysid.cli", "run", "--record",
+                             str(bag), "--json", str(out), "--nodes", "sim,identifier",
+                             "--outputs", "speed"],
+                            env=_env(ros_env, tmp_path), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and _flushed(bag) < 2500:
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.1)
+        flushed = _flushed(bag)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert "Traceback" not in err
+    with AnyReader([bag]) as reader:  # plain rosbags, no repair
+        stamps: dict[str, list[int]] = {}
+        total = 0
+        for conn, _, raw in reader.messages():
+            total += 1
+            if conn.topic.startswith("/pmsm/"):
+                msg = reader.deserialize(raw, conn.msgtype)
+                stamps.setdefault(conn.topic, []).append(
+                    msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec)
+    assert total >= flushed >= 2500
+    assert set(stamps) == {f"/pmsm/{s}" for s in SIGNALS}
+    for topic, ts in stamps.items():  # every sample from the first on, none skipped
+        steps = {b - a for a, b in itertools.pairwise(ts)}
+        assert steps == {2_000_000}, (topic, sorted(steps)[:5])
+    assert len({ts[0] for ts in stamps.values()}) == 1
+    assert max(map(len, stamps.values())) - min(map(len, stamps.values())) <= 1
+    if sig == signal.SIGKILL:
+        assert proc.returncode == -signal.SIGKILL
+        return
+    assert proc.returncode == 0, err
+    s = json.loads(out.read_text())
+    assert s["stopped_by_signal"] is True and s["recorded_messages"] == total
