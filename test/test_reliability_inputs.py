@@ -364,6 +364,8 @@ def test_bad_plant_files_one_line_in_every_verb_that_takes_one(
     cli_error(capsys, ["simulate", "--plant", str(negative), "--out", str(tmp_path / "s")],
               "mass_kg must be > 0")
     assert not (tmp_path / "s").exists()
+    cli_error(capsys, ["run", "--plant", str(unknown), "--duration", "1"],
+              "unknown key 'vicsous_n_per_mps'")
 
 
 def _model_file(path: Path, terms: dict[str, float], **extra: object) -> Path:

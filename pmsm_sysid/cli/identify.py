@@ -111,8 +111,8 @@ def _alignment_note(report: Any, out: Any) -> None:
         print(f"warning: reading the bag: {r.summary()}", file=out)
     if r.n_out_of_order:
         print(f"warning: {r.n_out_of_order} messages are stamped earlier than messages "
-              "received before them (a clock jump?): they were sorted by stamp and repeated "
-              "stamps kept first-received", file=out)
+              "received before them (reordered, or a clock jump): they were sorted by stamp, "
+              "a repeated stamp keeps the first received", file=out)
 
 
 def run(args: argparse.Namespace) -> int:
