@@ -243,9 +243,10 @@ def test_non_exciting_data_says_why(tmp_path: Path, data: tuple[np.ndarray, np.n
     u, y = data
     flat_out = bag_of(tmp_path / "flat_out", u, np.full_like(y, 0.25))
     assert_one_line_error(run_cli("identify", str(flat_out), *SMALL),
-                          "speed is constant in the estimation data")
-    cli_error(capsys, ["identify", str(bag_of(tmp_path / "flat_in", np.full_like(u, 3.0), y)),
-                       *SMALL], "thrust is constant in the estimation data")
+                          "insufficient excitation: speed is constant in the estimation data")
+    flat_in = bag_of(tmp_path / "flat_in", np.full_like(u, 3.0), y)
+    cli_error(capsys, ["identify", str(flat_in), *SMALL],
+              "insufficient excitation: thrust is constant in the estimation data")
     cli_error(capsys, ["identify", str(bag_of(tmp_path / "short", u[:30], y[:30])), *SMALL,
                        "--estimate", "0:12", "--no-validate"],
               "12 samples are too few", "need at least 14")

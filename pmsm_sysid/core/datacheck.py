@@ -166,9 +166,10 @@ def validate_fit_data(
                         f"need at least {need} (lag + 2 x parameters)")
     if float(np.ptp(u)) == 0.0:
         raise InsufficientExcitationError(
-            f"{input_name} is constant in the estimation data: nothing excites the system")
+            f"insufficient excitation: {input_name} is constant in the estimation data")
     if float(np.ptp(y[lag:])) == 0.0:
-        raise InsufficientExcitationError(f"{output_name} is constant in the estimation data")
+        raise InsufficientExcitationError(
+            f"insufficient excitation: {output_name} is constant in the estimation data")
 
 
 def describe_fit_data(
