@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
 import subprocess
 import sys
 import tempfile
@@ -62,7 +61,9 @@ def slope_mb_per_min(series: list[tuple[float, float]], warmup_s: float) -> floa
 
 
 def env() -> dict[str, str]:
-    domain = os.environ.get("ROS_DOMAIN_ID") or str(random.randint(150, 230))
+    # 231: outside the domains the test suite hands out (100..229), so a benchmark and a
+    # test run on one host do not hear each other
+    domain = os.environ.get("SOAK_DOMAIN_ID") or "231"
     log_dir = tempfile.mkdtemp(prefix="soak_ros_log_")
     return dict(os.environ, ROS_DOMAIN_ID=domain, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
                 ROS_LOG_DIR=log_dir, PYTHONUNBUFFERED="1")
