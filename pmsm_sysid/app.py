@@ -213,7 +213,7 @@ def build_pipeline(
                 made[name] = _make_checked(name, ctx, opts)
                 executor.add_node(made[name])
             if pipe.stepped:
-                pipe.sim._timer.cancel()  # stepped by the pipeline (back-pressure)
+                pipe.sim.stop_timer()  # stepped by the pipeline (back-pressure)
             if "identifier" in made or "gfrf" in made:
                 from .nodes.collector import ResultCollector
 

@@ -128,3 +128,18 @@ def test_bad_config_is_rejected() -> None:
         ChangeConfig(z_fire=3, z_confirm=5)
     with pytest.raises(DataError):
         ChangeDetector([])
+
+
+def test_after_a_change_the_window_spanning_it_is_not_learnt() -> None:
+    """holdoff windows (still holding pre-change data) are skipped, then warmup relearns."""
+    stream = _stream(120, 8)
+    for f in stream[60:]:
+        f["gain_db"] -= 5.0
+    cfg = ChangeConfig(holdoff=3, warmup=8)
+    det = ChangeDetector(FEATURES, cfg)
+    states = [det.update(i, f).state for i, f in enumerate(stream)]
+    k = states.index("change")
+    assert 60 <= k <= 61
+    assert states[k + 1:k + 4] == ["settling"] * 3
+    assert states[k + 4:k + 12] == ["learning"] * 8
+    assert set(states[k + 12:]) == {"steady"}

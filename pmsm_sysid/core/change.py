@@ -1,8 +1,9 @@
 """Change detection on the stream of window models (pure numpy).
 
-Each fitted window yields a few scalar *features* — the out-of-sample error of the previous
-model on the newest samples, the distance between consecutive term sets, the first-order
-GFRF at the excitation frequency, the H1 peak. On a stationary plant these wander within a
+Each fitted window yields a few scalar *features* (:mod:`.tracker` computes them: the
+out-of-sample error of the previous model on the newest samples, the new model's own fit,
+the distance between consecutive term sets, the first-order GFRF at the excitation
+frequency, the output's harmonic content). On a stationary plant these wander within a
 spread of their own; a plant change (cogging switched on, a payload added) moves them beyond
 it. For every feature a running baseline over the last ``baseline`` windows gives a robust
 centre (median) and scale (1.4826 x MAD, never below an absolute and a relative floor), and
@@ -10,10 +11,12 @@ the window's robust z-score.
 
 Decision (one rule for every feature): a change is reported at window j when some feature has
 z >= ``z_fire``, or z >= ``z_confirm`` at both j and j-1 (a persistent shift). After a change
-the baselines are cleared and relearnt over ``warmup`` windows (no decision meanwhile), so the
-new regime becomes the reference. A value that is not finite counts as "no observation" for
-two-sided features; for one-sided (error-like) ones, e.g. a diverged free run, it counts as
-exactly ``z_confirm``: a change once it happens on two windows in a row.
+the baselines are cleared; the next ``holdoff`` windows are ignored (they still hold data from
+before the change: window/hop - 1 of them) and the following ``warmup`` windows relearn the
+baselines (no decision meanwhile), so the new regime becomes the reference. A value that
+is not finite counts as "no observation" for two-sided features; for one-sided (error-like)
+ones, e.g. a diverged free run, it counts as exactly ``z_confirm``: a change once it happens
+on two windows in a row.
 
 Thresholds were calibrated on simulated runs of the nominal plant (no alarm over long
 stationary runs) and of cogging/payload switches (detected within three windows); see
@@ -51,12 +54,15 @@ class ChangeConfig:
     baseline: int = 24
     warmup: int = 8
     z_fire: float = 12.0
-    z_confirm: float = 6.0
+    z_confirm: float = 5.0
+    holdoff: int = 3
 
     def __post_init__(self) -> None:
         if self.warmup < 3 or self.baseline < self.warmup:
             raise DataError(f"change detector: need 3 <= warmup <= baseline "
                             f"(got {self.warmup}, {self.baseline})")
+        if self.holdoff < 0:
+            raise DataError(f"change detector: holdoff must be >= 0 (got {self.holdoff})")
         if not 0 < self.z_confirm <= self.z_fire:
             raise DataError(f"change detector: need 0 < z_confirm <= z_fire "
                             f"(got {self.z_confirm}, {self.z_fire})")
@@ -64,8 +70,8 @@ class ChangeConfig:
 
 @dataclass(frozen=True)
 class ChangeDecision:
-    """Outcome for one window: ``state`` is ``learning``, ``steady``, ``change`` or
-    ``unjudged`` (no feature values given)."""
+    """Outcome for one window: ``state`` is ``settling`` (just after a change), ``learning``,
+    ``steady``, ``change`` or ``unjudged`` (no feature values given)."""
 
     seq: int
     state: str
@@ -133,6 +139,7 @@ class ChangeDetector:
                       for f in features}
         self._prev_hot: set[str] = set()
         self._since_reset = 0
+        self._settle = 0
         self.events: list[ChangeDecision] = []
 
     def update(self, seq: int, values: Mapping[str, float]) -> ChangeDecision:
@@ -142,6 +149,9 @@ class ChangeDetector:
         if not vals:  # nothing judged this window: the next one is not "consecutive"
             self._prev_hot = set()
             return ChangeDecision(seq, "unjudged")
+        if self._settle > 0:
+            self._settle -= 1
+            return ChangeDecision(seq, "settling", values=vals)
         if self._since_reset < cfg.warmup:
             self._learn(vals)
             return ChangeDecision(seq, "learning", values=vals)
@@ -154,6 +164,7 @@ class ChangeDetector:
         reasons = tuple(dict.fromkeys(fire + confirmed))
         if reasons:
             self.reset()
+            self._settle = cfg.holdoff
             decision = ChangeDecision(seq, "change", z, vals, reasons)
             self.events.append(decision)
             return decision

@@ -15,8 +15,10 @@ samples before a feeding the lags, exactly as ``identify --estimate a:b`` does):
    on the model's estimation residuals (the model validity tests as Billings & Voon define
    them, seed §II.3). The tests on the new window are published beside, as information: a
    NARX model has no noise model, so coloured process noise shows there first.
-3. **Change features** (:mod:`.change`), judged only for models that reproduce their own
-   window (free-run R^2 >= ``min_r2``; otherwise the window is ``unjudged``): the
+3. **Change features** (:mod:`.change`), judged for an output whose models reproduce their
+   own windows (median free-run R^2 of the recent windows >= ``min_r2``; otherwise the
+   window is ``unjudged``, e.g. a position model under the speed protocol): the new model's
+   free-run NRMSE on its own window (a window spanning a change fits worse); the
    out-of-sample error of the previous window's model on the ``hop`` newest samples (free
    run over the window, NRMSE of the new samples);
    the gain and phase of the new model's H1 (seed Eq. 7) at the reference excitation
@@ -33,7 +35,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -41,7 +43,6 @@ from numpy.typing import NDArray
 
 from .change import (
     ChangeConfig,
-    ChangeDecision,
     ChangeDetector,
     FeatureSpec,
     jaccard_distance,
@@ -64,6 +65,7 @@ CHANGE_FEATURES = (
     FeatureSpec("h1_phase_rad", floor=0.005),
     FeatureSpec("term_jaccard", one_sided=True, floor=0.05),
     FeatureSpec("harmonics_db", floor=1.0),
+    FeatureSpec("fit_nrmse", one_sided=True, floor=1e-3, rel_floor=0.1),
 )
 
 
@@ -116,7 +118,8 @@ def tracker_config(p: Mapping[str, Any]) -> TrackerConfig:
                                               method=str(p["method"]))))
     change = ChangeConfig(baseline=int(p["change.baseline"]), warmup=int(p["change.warmup"]),
                           z_fire=float(p["change.z_fire"]),
-                          z_confirm=float(p["change.z_confirm"]))
+                          z_confirm=float(p["change.z_confirm"]),
+                          holdoff=max(0, int(p["window"]) // max(1, int(p["hop"])) - 1))
     return TrackerConfig(tuple(cfgs), window=int(p["window"]), hop=int(p["hop"]),
                          min_r2=float(p["min_r2"]),
                          change=change)
@@ -159,6 +162,7 @@ class _OutputTrack:
         self.previous: NarxModel | None = None
         self.ref_freq: float | None = None
         self.ref_phase: float | None = None
+        self.r2: deque[float] = deque(maxlen=tc.change.baseline)
         self.held: deque[_Held] = deque(maxlen=max_held)
 
 
@@ -215,9 +219,14 @@ class WindowTracker:
         model_json, model = self._fit(track.cfg, y, u, fs, info)
         acc["models"].append(model_json)
         est = model_json["validation"]["estimation"]
-        reliable = not est["free_run_diverged"] and est["r2"] >= self.config.min_r2
-        decision = (self._judge(track, w, model, y, u) if reliable
-                    else track.detector.update(w.seq, {}))
+        feats = self._features(track, w, model, y, u, est)
+        r2 = est["r2"] if est["r2"] is not None and not est["free_run_diverged"] else -math.inf
+        track.r2.append(float(r2))
+        monitored = len(track.r2) >= 3 and float(np.median(track.r2)) >= self.config.min_r2
+        decision = track.detector.update(w.seq, feats if monitored else {})
+        if decision.changed:
+            track.ref_freq = None
+        decision = replace(decision, values=feats)
         ident = {"output": name, "model_id": model_json["model_id"]}
         acc["decisions"].append({**ident, **decision.to_dict()})
         if decision.changed:
@@ -285,8 +294,9 @@ class WindowTracker:
                 "correlation_tests_validation": corr.to_dict(), "min_r2": self.config.min_r2,
                 "pass": bool(ok)}
 
-    def _judge(self, track: _OutputTrack, w: Window, model: NarxModel, y: FloatArray,
-               u: FloatArray) -> ChangeDecision:
+    def _features(self, track: _OutputTrack, w: Window, model: NarxModel, y: FloatArray,
+                  u: FloatArray, est: Mapping[str, Any]) -> dict[str, float]:
+        """The change features of this window (module docstring, item 3)."""
         u_win = u[-(w.stop_index - w.start_index):]
         if track.ref_freq is None:
             track.ref_freq, track.ref_phase = dominant_frequency(u_win), None
@@ -295,13 +305,12 @@ class WindowTracker:
             track.ref_phase = feats["h1_phase_rad"]
         feats["h1_phase_rad"] = wrap_phase(feats["h1_phase_rad"] - (track.ref_phase or 0.0))
         feats["harmonics_db"] = harmonics_db(y[len(y) - len(u_win):], dominant_frequency(u_win))
+        nrmse = est["nrmse"]
+        feats["fit_nrmse"] = math.inf if nrmse is None or est["free_run_diverged"] else nrmse
         if track.previous is not None:
             feats["xval_nrmse"] = newest_error(track.previous, y, u, self.config.hop)
             feats["term_jaccard"] = jaccard_distance(model.term_names, track.previous.term_names)
-        decision = track.detector.update(w.seq, feats)
-        if decision.changed:
-            track.ref_freq = None
-        return decision
+        return feats
 
 
 def dominant_frequency(u: FloatArray) -> float:

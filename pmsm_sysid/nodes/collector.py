@@ -35,6 +35,7 @@ class ResultCollector(Node):
         self.ridges: dict[str, dict[str, Any]] = {}
         self.ridges_log: deque[dict[str, Any]] = deque(maxlen=keep_models)
         self.validation: dict[str, dict[str, Any]] = {}
+        self.validation_log: deque[dict[str, Any]] = deque(maxlen=keep_models)
         self.changes: deque[dict[str, Any]] = deque(maxlen=200)
         self.counts = dict.fromkeys(("model", "ridges", "validation", "change"), 0)
         self.create_subscription(String, MODEL_TOPIC, self._on_model, DEPTH)
@@ -60,6 +61,7 @@ class ResultCollector(Node):
         self.counts["validation"] += 1
         for s in diagnostic_dicts(msg):
             self.validation[s["name"]] = s
+            self.validation_log.append(s)
 
     def _on_change(self, msg: DiagnosticArray) -> None:
         self.counts["change"] += 1

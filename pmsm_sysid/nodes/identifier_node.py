@@ -47,10 +47,10 @@ OK, WARN = DiagnosticStatus.OK, DiagnosticStatus.WARN
 DEFAULTS: dict[str, Any] = {
     "input_layout": "topics", "joint_name": "", "joint_state_topic": "/joint_states",
     "window": 1000, "hop": 250, "queue_size": 1, "sample_rate_hz": 0.0, "tolerance_s": 0.0,
-    "outputs": ["speed", "position"], "method": "ofr", "criterion": "terms",
+    "outputs": ["speed", "position"], "method": "iofr", "criterion": "terms",
     "speed.ny": 30, "speed.nu": 40, "speed.degree": 2, "speed.delay": 1, "speed.terms": 15,
     "position.ny": 10, "position.nu": 10, "position.degree": 2, "position.delay": 1,
-    "position.terms": 15, "min_r2": 0.9, "change.z_fire": 12.0, "change.z_confirm": 6.0,
+    "position.terms": 15, "min_r2": 0.9, "change.z_fire": 12.0, "change.z_confirm": 5.0,
     "change.baseline": 24, "change.warmup": 8, "publish_period_s": 0.05,
 }
 
