@@ -169,6 +169,7 @@ def test_no_false_alarm_open_loop(seed: int) -> None:
     result = diagnose(nominal_plant(), make_recording("nominal", seed=seed), options=FAST)
     assert result.effects == ()
     assert "no significant missing physics" in result.summary()
+    _no_gfrf_alarm(result)
 
 
 @pytest.mark.parametrize("seed", [21, 22])
@@ -176,7 +177,17 @@ def test_no_false_alarm_closed_loop(seed: int) -> None:
     ref = reference_trajectory(2500, FS, (0.02, 0.004), (0.4, 1.7))
     rec = run_closed_loop(SCENARIOS["nominal"].plant, ref,
                           PositionLoop.for_bandwidth(nominal_plant(), 15.0), seed=seed)
-    assert diagnose(nominal_plant(), rec, options=FAST).effects == ()
+    result = diagnose(nominal_plant(), rec, options=FAST)
+    assert result.effects == ()
+    _no_gfrf_alarm(result)
+
+
+def _no_gfrf_alarm(result: DiagnoseResult) -> None:
+    """Nothing over frequency either: the GFRF comparison finds no ridge or peak only in
+    the recording's model (it is the nominal motor's)."""
+    g = result.gfrf
+    assert g is not None and not g.get("skipped"), g
+    assert g["ridges_only_in_real"] == [] and g["peaks_only_in_real"] == [], g
 
 
 def test_unexplained_force_is_not_forced_into_a_name() -> None:

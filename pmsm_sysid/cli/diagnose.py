@@ -44,6 +44,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="smallest share of the mismatch an effect must explain (default 0.01)")
     p.add_argument("--no-replay", action="store_true",
                    help="skip the short-horizon speed replay (output error)")
+    p.add_argument("--no-gfrf", action="store_true",
+                   help="skip the GFRF comparison of the real data's NARX with a noisy "
+                        "simulated twin's")
     p.add_argument("--json", metavar="FILE", help="write the diagnose JSON ('-' = stdout)")
     p.add_argument("--corrected-plant", metavar="FILE",
                    help="also write the corrected plant as a YAML plant file")
@@ -60,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     validate = (read_recording(args.validate, namespace=args.namespace).recording
                 if args.validate else None)
     options = DiagnoseOptions(alpha=args.alpha, min_share=args.min_share,
-                              replay=not args.no_replay)
+                              replay=not args.no_replay, gfrf=not args.no_gfrf)
     result = diagnose(plant, real, validate, options)
     out = sys.stderr if args.json == "-" else sys.stdout
     print(f"diagnose: plant {args.plant} vs recording {args.real} "

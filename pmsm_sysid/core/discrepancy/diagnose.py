@@ -12,6 +12,10 @@
    (output error, :mod:`.resim`) before/after, on estimation and held-out data, and the
    correlation tests (seed Eq. 13) of the prewhitened residual before/after.
 
+Over frequency the GFRFs of a NARX fitted to the real data and to a noisy simulated twin
+are compared too (:mod:`.gfrf_compare`): the H2 ridges and H1 peaks only the real data's
+model has are a ``mismatch.where`` entry with ``source: gfrf``.
+
 Held-out data are ``validate`` when given; otherwise the last 30 % of the recording, and
 the confirmed effects' parameters are then re-estimated on the whole recording (the fit
 table keeps the estimation-only model, so its held-out numbers stay honest).
@@ -28,6 +32,7 @@ from ..errors import DiagnoseError, PlantError, SysIdError
 from ..plant import Plant
 from ..signals import Recording, check_finite
 from .estimate import Fit, contributions, design, refine
+from .gfrf_compare import gfrf_where
 from .kinematics import (
     FEEDBACK_Z,
     EquationData,
@@ -61,6 +66,7 @@ class DiagnoseOptions:
     split: float = SPLIT
     max_effects: int = MAX_EFFECTS
     replay: bool = True
+    gfrf: bool = True
 
 
 @dataclass(frozen=True)
@@ -226,13 +232,15 @@ def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
               "held-out data; it is not reported" for e in dropped]
     method = _method(segs, opts, n_tests, validate is not None)
     method["feedback"] = {"z": fb, "closed_loop": closed}
+    gfrf = gfrf_where(plant, segs.recs["estimation"], opts.alpha) if opts.gfrf else None
     if closed:
         notes.append(_CLOSED_NOTE)
     return DiagnoseResult(
         plant=plant, corrected=corrected, effects=tuple(found),
         where=tuple(where_table(segs.est, ranking)), nrmse_before=table["estimation"]
         ["nrmse_before"], fit=table, candidates=tuple(_rank_dict(s) for s in ranking),
-        method=method, notes=tuple(notes), curves=_curves(segs, model.fit, replays))
+        method=method, notes=tuple(notes), curves=_curves(segs, model.fit, replays),
+        gfrf=gfrf)
 
 
 def _final(model: Model, segs: Segments) -> tuple[Fit, EquationData]:

@@ -81,12 +81,14 @@ class DiagnoseResult:
     method: dict[str, Any]
     notes: tuple[str, ...] = ()
     curves: Curves = field(default_factory=Curves)
+    gfrf: dict[str, Any] | None = None  # the GFRF comparison's mismatch.where entry
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "plant": plant_to_dict(self.plant),
             "mismatch": {"nrmse_before": self.nrmse_before,
-                         "where": [w.to_dict() for w in self.where],
+                         "where": [w.to_dict() for w in self.where]
+                         + ([self.gfrf] if self.gfrf is not None else []),
                          "candidates": list(self.candidates)},
             "effects": [e.to_dict() for e in self.effects],
             "corrected_plant": plant_to_dict(self.corrected),
@@ -118,6 +120,11 @@ class DiagnoseResult:
         if strong and self.effects:
             lines.append("mismatch lives over: " + ", ".join(
                 f"{w.axis} ({w.share:.0%})" for w in sorted(strong, key=lambda w: -w.share)))
+        if self.gfrf is not None:
+            st = self.gfrf.get("structure") or {}
+            what = (f"NARX ny={st['ny']} nu={st['nu']} degree {st['degree']}, "
+                    if st else "")
+            lines.append(f"GFRF ({what}real data vs noisy twin): {self.gfrf['note']}")
         lines += [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
 
