@@ -57,10 +57,16 @@ def fit_table(d: Mapping[str, Any]) -> Table:
                            "speed after"), tuple(rows))
 
 
+def _where_row(w: Mapping[str, Any]) -> tuple[str, str, str]:
+    """One row of the 'where' table; entries without a share (the GFRF comparison) say n/a."""
+    axis = str(w.get("axis")) + (f" ({w['source']})" if w.get("source") else "")
+    share = w.get("share")
+    return axis, ("n/a" if share is None else f"{100 * float(share):.1f}%"), _v(
+        w.get("significance"))
+
+
 def where_table(d: Mapping[str, Any]) -> Table:
-    rows = tuple((str(w.get("axis")), f"{100 * float(w.get('share') or 0):.1f}%",
-                  _v(w.get("significance")))
-                 for w in (d.get("mismatch") or {}).get("where") or [])
+    rows = tuple(_where_row(w) for w in (d.get("mismatch") or {}).get("where") or [])
     return Table("Where the nominal plant's residual lives", ("axis", "share", "significance"),
                  rows)
 
