@@ -126,24 +126,30 @@ class Pipeline:
             sim.step(burst if limit is None else min(burst, limit - sim.published))
 
     def finish(self, timeout_s: float = 30.0) -> None:
-        """Fit what is queued, publish it, and let the GFRF node analyse the last models."""
-        ident = self.identifier
-        if ident is None:
-            self.run(0.3)
-            return
-        ident.engine.flush()
-        ident.engine.wait_idle(timeout_s)
-        ident.publish_results()
-        if self.gfrf is not None:
-            t_end = time.monotonic() + timeout_s
-            want, g = ident.models_published, self.gfrf
-            while time.monotonic() < t_end and self.context.ok():
-                self.executor.spin_once(timeout_sec=0.02)
-                done = g.worker.stats.processed + g.queue.skipped
-                if g.received >= want and done >= g.received:
-                    g.publish_results()
-                    break
+        """Fit what is queued and publish it, let the GFRF node analyse the last models, and
+        let this process's collector receive the results (each step bounded by timeout_s)."""
+        ident, g = self.identifier, self.gfrf
+        if ident is not None:
+            ident.engine.flush()
+            ident.engine.wait_idle(timeout_s)
+            ident.publish_results()
+        if g is not None:
+            want = ident.models_published if ident is not None else g.received
+            self._spin_while(lambda: not (g.received >= want and g.worker.stats.processed
+                                          + g.queue.skipped >= g.received), timeout_s)
+            g.publish_results()
+        col = self.nodes.get("collector")
+        if col is not None:
+            models = ident.models_published if ident is not None else 0
+            ridges = g.published if g is not None else 0
+            self._spin_while(lambda: col.counts["model"] < models
+                             or col.counts["ridges"] < ridges, min(timeout_s, 5.0))
         self.executor.spin_once(timeout_sec=0.05)
+
+    def _spin_while(self, busy: Callable[[], bool], timeout_s: float) -> None:
+        t_end = time.monotonic() + timeout_s
+        while busy() and time.monotonic() < t_end and self.context.ok():
+            self.executor.spin_once(timeout_sec=0.02)
 
     def summary(self) -> dict[str, Any]:
         """The ``run --json`` summary (contract §3 keys plus per-node details)."""

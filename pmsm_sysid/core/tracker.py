@@ -5,8 +5,10 @@ samples before a feeding the lags, exactly as ``identify --estimate a:b`` does):
 
 1. **Fit** by OFR/iOFR (:func:`.identify.fit_narx`) and validate on the window itself
    (:func:`.identify.validate_narx`: model predicted output, seed Eq. 12; correlation tests,
-   Eq. 13). The model JSON has the ``identify`` shape plus ``window``, ``fit_time_ms``,
-   ``model_id``; its ``validation.validation`` is null: independent data come later.
+   Eq. 13). The model JSON has the ``identify`` shape (with the input's ``excitation``
+   summary, so the GFRF node can judge which peaks the data support) plus ``window``,
+   ``fit_time_ms``, ``model_id``; its ``validation.validation`` is null: independent data
+   come later.
 2. **Cross-validate** every earlier model on the first window that starts at or after that
    model's window ends (no shared samples; with the defaults, the model of window j-4): free
    run (Eq. 12) NRMSE/R^2 and one-step-ahead R^2 on the new window, and the five correlation
@@ -49,6 +51,7 @@ from .change import (
 )
 from .errors import DataError, SysIdError
 from .gfrf import Gfrf
+from .identifiability import excitation_summary
 from .identify import METHODS, FitConfig, fit_narx, validate_narx
 from .model import NarxModel, Structure
 from .online import NS_PER_S, Window
@@ -259,7 +262,9 @@ class WindowTracker:
             "method": fit.method, "criterion": fit.criterion, "dc_removed": fit.dc_removed,
             "terms": fit.model.terms_json(), "sum_err": fit.sum_err,
             "greedy_terms": list(fit.greedy_terms), "n_swaps": fit.n_swaps,
-            "validation": report.to_dict(), "timing_ms": fit.timing_ms,
+            "validation": report.to_dict(),
+            "excitation": excitation_summary(u[st.max_lag:], fs).to_dict(),
+            "timing_ms": fit.timing_ms,
             "window": info, "model_id": model_id,
             "fit_time_ms": 1e3 * (time.perf_counter() - t0),
         }
