@@ -1,0 +1,94 @@
+"""Motor side and identification side as two processes on one host, found over DDS.
+
+``run --nodes sim`` (sim clock, real-time rate) and ``run --nodes identifier,gfrf --record``
+run as two subprocesses on the test's own ROS domain; the models they publish (read back
+from the recording) equal the models of the same sim + seed in one process, window by window
+(windows sit on the sample-index grid of the stamps, so both cut the same windows even though
+the second process starts listening at some sample of its own).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+REPO = Path(__file__).resolve().parents[1]
+PLANT = REPO / "plants" / "nominal_noisy.yaml"
+SECONDS = 6.0
+CLI = [sys.executable, "-m", "pmsm_sysid.cli", "run"]
+
+
+def _models_from_bag(bag: Path) -> dict[str, dict[str, Any]]:
+    from rosbags.highlevel import AnyReader
+
+    from pmsm_sysid.bagio import typestore
+
+    out = {}
+    with AnyReader([bag], default_typestore=typestore()) as reader:
+        conns = [c for c in reader.connections if c.topic == "/pmsm_sysid/model"]
+        for conn, _, raw in reader.messages(connections=conns):
+            m = json.loads(reader.deserialize(raw, conn.msgtype).data)
+            out[m["model_id"]] = m
+    return out
+
+
+def test_two_processes_give_the_one_process_models(ros_context: Any, ros_env: int,
+                                                   tmp_path: Path) -> None:
+    from pmsm_sysid.app import build_pipeline
+    from pmsm_sysid.core.plant import load_plant
+
+    env = {**os.environ, "ROS_DOMAIN_ID": str(ros_env), "ROS_LOG_DIR": str(tmp_path / "log"),
+           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    bag, summary = tmp_path / "ident", tmp_path / "ident.json"
+    ident = subprocess.Popen([*CLI, "--nodes", "identifier,gfrf", "--outputs", "speed",
+                              "--record", str(bag), "--json", str(summary)],
+                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(3.0)  # the identification side is up and subscribed
+        sim = subprocess.run([*CLI, "--nodes", "sim", "--clock", "sim", "--rate", "1",
+                              "--plant", str(PLANT), "--seed", "7", "--duration", str(SECONDS),
+                              "--json", str(tmp_path / "sim.json")],
+                             env=env, capture_output=True, text=True, timeout=120)
+        assert sim.returncode == 0, sim.stderr
+        time.sleep(3.0)  # the last samples arrive; then stop it as a user would
+        ident.send_signal(signal.SIGTERM)
+        _, err = ident.communicate(timeout=120)
+    finally:
+        if ident.poll() is None:
+            ident.kill()
+    assert ident.returncode == 0, err
+    s = json.loads(summary.read_text())
+    published = json.loads((tmp_path / "sim.json").read_text())["samples_published"]
+    assert published == SECONDS * 500
+    # discovery takes its time: the first samples may be missed, none after that
+    assert 0.7 * published <= s["samples_received"] <= published
+    assert s["samples_dropped"] == 0 and s["samples_missing"] == 0
+    assert s["windows_skipped"] == 0
+    remote = _models_from_bag(bag)
+    assert len(remote) == s["models_published"] >= 5
+
+    with build_pipeline(["sim", "identifier"], plant=load_plant(PLANT), seed=7, clock="sim",
+                        context=ros_context, identifier_params={"outputs": ["speed"]}) as pipe:
+        pipe.run(SECONDS)
+        pipe.finish()
+        local = {m["model_id"]: m for m in pipe.nodes["collector"].model_log}
+
+    assert len(local) == 8  # windows ending at 1250, 1500, ..., 3000
+    common = sorted(set(local) & set(remote))
+    assert len(common) >= 5 and set(remote) <= set(local)
+    for key in common:
+        a, b = local[key], remote[key]
+        assert a["window"] == b["window"]
+        assert [t["name"] for t in a["terms"]] == [t["name"] for t in b["terms"]]
+        np.testing.assert_array_equal([t["estimate"] for t in a["terms"]],
+                                      [t["estimate"] for t in b["terms"]])
