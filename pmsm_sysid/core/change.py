@@ -9,18 +9,22 @@ it. For every feature a running baseline over the last ``baseline`` windows give
 centre (median) and scale (1.4826 x MAD, never below an absolute and a relative floor), and
 the window's robust z-score.
 
-Decision (one rule for every feature): a change is reported at window j when some feature has
-z >= ``z_fire``, or z >= ``z_confirm`` at both j and j-1 (a persistent shift). After a change
+Decision: a change is reported at window j when some feature has z >= ``z_fire`` (one
+window, a jump no stationary run shows), or when the combined score S = sqrt(sum z_k^2) over
+the window's features (each z clipped to [0, ``z_cap``]: errors count only when they grow) is
+>= ``s_confirm`` at both j and j-1 (a persistent shift seen by several features at once, or
+strongly by one). With six features S is about 2.4 on a stationary plant. After a change
 the baselines are cleared; the next ``holdoff`` windows are ignored (they still hold data from
 before the change: window/hop - 1 of them) and the following ``warmup`` windows relearn the
 baselines (no decision meanwhile), so the new regime becomes the reference. A value that
 is not finite counts as "no observation" for two-sided features; for one-sided (error-like)
-ones, e.g. a diverged free run, it counts as exactly ``z_confirm``: a change once it happens
-on two windows in a row.
+ones, e.g. a diverged free run, it adds ``z_cap`` to S but never fires alone.
 
-Thresholds were calibrated on simulated runs of the nominal plant (no alarm over long
-stationary runs) and of cogging/payload switches (detected within three windows); see
-``test/test_change.py``.
+Calibration (defaults; paper protocol, 1000-sample windows, hop 250, speed model): over
+155-window stationary runs of the noisy nominal motor and of a motor resonant at 16.5 Hz the
+largest single-window S was 7.3 and no change was reported; cogging (plants/cogging.yaml)
+switched on was reported 2-3 windows after the first window holding cogging data, 0.5 kg of
+payload in the first. ``test/test_change.py`` repeats shorter versions of both.
 """
 
 from __future__ import annotations
@@ -54,7 +58,8 @@ class ChangeConfig:
     baseline: int = 24
     warmup: int = 8
     z_fire: float = 12.0
-    z_confirm: float = 5.0
+    s_confirm: float = 8.0
+    z_cap: float = 20.0
     holdoff: int = 3
 
     def __post_init__(self) -> None:
@@ -63,9 +68,9 @@ class ChangeConfig:
                             f"(got {self.warmup}, {self.baseline})")
         if self.holdoff < 0:
             raise DataError(f"change detector: holdoff must be >= 0 (got {self.holdoff})")
-        if not 0 < self.z_confirm <= self.z_fire:
-            raise DataError(f"change detector: need 0 < z_confirm <= z_fire "
-                            f"(got {self.z_confirm}, {self.z_fire})")
+        if not (self.z_fire > 0 and self.s_confirm > 0 and self.z_cap > 0):
+            raise DataError(f"change detector: z_fire, s_confirm and z_cap must be > 0 "
+                            f"(got {self.z_fire}, {self.s_confirm}, {self.z_cap})")
 
 
 @dataclass(frozen=True)
@@ -78,19 +83,15 @@ class ChangeDecision:
     z: dict[str, float] = field(default_factory=dict)
     values: dict[str, float] = field(default_factory=dict)
     reasons: tuple[str, ...] = ()
+    score: float = 0.0
 
     @property
     def changed(self) -> bool:
         return self.state == "change"
 
-    @property
-    def score(self) -> float:
-        """Largest z of the window (0 while learning; features without a value skipped)."""
-        return max((v for v in self.z.values() if not math.isnan(v)), default=0.0)
-
     def to_dict(self) -> dict[str, object]:
         return {"seq": self.seq, "state": self.state, "reasons": list(self.reasons),
-                "z": dict(self.z), "values": dict(self.values)}
+                "score": self.score, "z": dict(self.z), "values": dict(self.values)}
 
 
 class RobustBaseline:
@@ -137,7 +138,7 @@ class ChangeDetector:
         self.features = {f.name: f for f in features}
         self._base = {f.name: RobustBaseline(self.config.baseline, f.floor, f.rel_floor)
                       for f in features}
-        self._prev_hot: set[str] = set()
+        self._prev_score = 0.0
         self._since_reset = 0
         self._settle = 0
         self.events: list[ChangeDecision] = []
@@ -147,7 +148,7 @@ class ChangeDetector:
         vals = {k: float(values[k]) for k in self.features if k in values}
         cfg = self.config
         if not vals:  # nothing judged this window: the next one is not "consecutive"
-            self._prev_hot = set()
+            self._prev_score = 0.0
             return ChangeDecision(seq, "unjudged")
         if self._settle > 0:
             self._settle -= 1
@@ -156,26 +157,25 @@ class ChangeDetector:
             self._learn(vals)
             return ChangeDecision(seq, "learning", values=vals)
         z = {k: self._base[k].z(v, self.features[k].one_sided) for k, v in vals.items()}
-        z = {k: cfg.z_confirm if math.isinf(s) else s for k, s in z.items()}
-        hot = {k for k, s in z.items() if s >= cfg.z_confirm}
-        fire = sorted(k for k, s in z.items() if s >= cfg.z_fire)
-        confirmed = sorted(hot & self._prev_hot)
-        self._prev_hot = hot
-        reasons = tuple(dict.fromkeys(fire + confirmed))
-        if reasons:
+        score = combined_score(z, cfg.z_cap)
+        fire = sorted(k for k, s in z.items() if math.isfinite(s) and s >= cfg.z_fire)
+        persistent = score >= cfg.s_confirm and self._prev_score >= cfg.s_confirm
+        self._prev_score = score
+        if fire or persistent:
+            reasons = tuple(fire) if fire else _leading(z)
             self.reset()
             self._settle = cfg.holdoff
-            decision = ChangeDecision(seq, "change", z, vals, reasons)
+            decision = ChangeDecision(seq, "change", z, vals, reasons, score)
             self.events.append(decision)
             return decision
         self._learn(vals)
-        return ChangeDecision(seq, "steady", z, vals)
+        return ChangeDecision(seq, "steady", z, vals, score=score)
 
     def reset(self) -> None:
         """Forget the baselines (after a change, or when the caller restarts the stream)."""
         for b in self._base.values():
             b.clear()
-        self._prev_hot = set()
+        self._prev_score = 0.0
         self._since_reset = 0
 
     def _learn(self, vals: Mapping[str, float]) -> None:
@@ -184,20 +184,20 @@ class ChangeDetector:
         self._since_reset += 1
 
 
+def combined_score(z: Mapping[str, float], cap: float) -> float:
+    """Root sum of squares of the window's z-scores, each clipped to [0, cap] (a diverged
+    free run, z = inf, counts as ``cap``; features without a value are skipped)."""
+    return math.sqrt(sum(min(max(v, 0.0), cap) ** 2 for v in z.values() if not math.isnan(v)))
+
+
+def _leading(z: Mapping[str, float], n: int = 3) -> tuple[str, ...]:
+    """The ``n`` features with the largest z (the main contributors to the score)."""
+    ranked = sorted((k for k, v in z.items() if not math.isnan(v)), key=lambda k: -z[k])
+    return tuple(ranked[:n])
+
+
 def jaccard_distance(a: Iterable[str], b: Iterable[str]) -> float:
     """1 - |A ∩ B| / |A ∪ B| of two term-name sets (0 = same terms, 1 = disjoint)."""
     sa, sb = set(a), set(b)
     union = sa | sb
     return 0.0 if not union else 1.0 - len(sa & sb) / len(union)
-
-
-def nrmse(y: Sequence[float] | np.ndarray, y_hat: Sequence[float] | np.ndarray) -> float:
-    """Root-mean-square error over the standard deviation of ``y`` (inf if not finite)."""
-    ya, yh = np.asarray(y, dtype=np.float64), np.asarray(y_hat, dtype=np.float64)
-    if ya.shape != yh.shape or ya.size < 2:
-        raise DataError(f"nrmse: need two equal-length series (got {ya.shape}, {yh.shape})")
-    err = float(np.sqrt(np.mean((ya - yh) ** 2)))
-    sd = float(np.std(ya))
-    if not math.isfinite(err):
-        return math.inf
-    return err / sd if sd > 0 else (0.0 if err == 0 else math.inf)

@@ -65,7 +65,7 @@ OUTPUTS = ("speed", "position")
 CHANGE_FEATURES = (
     FeatureSpec("xval_nrmse", one_sided=True, floor=1e-3, rel_floor=0.1),
     FeatureSpec("h1_gain_db", floor=0.02),
-    FeatureSpec("h1_phase_rad", floor=0.005),
+    FeatureSpec("h1_phase_rad", floor=0.05),
     FeatureSpec("term_jaccard", one_sided=True, floor=0.05),
     FeatureSpec("harmonics_db", floor=1.0),
     FeatureSpec("fit_nrmse", one_sided=True, floor=1e-3, rel_floor=0.1),
@@ -121,7 +121,7 @@ def tracker_config(p: Mapping[str, Any]) -> TrackerConfig:
                                               method=str(p["method"]))))
     change = ChangeConfig(baseline=int(p["change.baseline"]), warmup=int(p["change.warmup"]),
                           z_fire=float(p["change.z_fire"]),
-                          z_confirm=float(p["change.z_confirm"]),
+                          s_confirm=float(p["change.s_confirm"]),
                           holdoff=max(0, int(p["window"]) // max(1, int(p["hop"])) - 1))
     return TrackerConfig(tuple(cfgs), window=int(p["window"]), hop=int(p["hop"]),
                          min_r2=float(p["min_r2"]),
