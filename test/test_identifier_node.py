@@ -14,8 +14,9 @@ from pmsm_sysid.core.model import NarxModel, Structure
 
 pytestmark = pytest.mark.ros
 PERIOD_NS = 2_000_000
-SMALL = {"window": 300, "hop": 100, "speed.ny": 3, "speed.nu": 3, "speed.terms": 6,
-         "position.ny": 3, "position.nu": 3, "position.terms": 6, "method": "ofr"}
+SMALL = {"window": 300, "hop": 100, "queue_size": 32, "speed.ny": 3, "speed.nu": 3,
+         "speed.terms": 6, "position.ny": 3, "position.nu": 3, "position.terms": 6,
+         "method": "ofr"}
 
 
 def _data(n: int, seed: int = 0) -> np.ndarray:

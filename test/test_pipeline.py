@@ -22,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from pmsm_sysid.core.plant import CoulombFriction, Noise, Spring, load_plant, nominal_plant
+from pmsm_sysid.core.plant import Noise, Spring, ThrustRipple, load_plant, nominal_plant
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 F0 = 16.5
@@ -34,7 +34,7 @@ def resonant_plant() -> Any:
     m = nominal_plant().mass_kg
     return nominal_plant().with_effects(
         spring=Spring(stiffness_n_per_m=m * (2 * math.pi * F0) ** 2),
-        coulomb_friction=CoulombFriction(amplitude_n=0.5),
+        thrust_ripple=ThrustRipple(relative=0.05, pitch_m=0.032),
         noise=Noise(speed_std=0.002, position_std=5e-6, force_std=1.0))
 
 
@@ -56,12 +56,12 @@ def _near(f: float | None) -> bool:
 
 
 def _ridge_ok(r: dict[str, Any]) -> bool:
-    """Strongest H1 peak at F0; H2 ridges f1 = +-F0 and f1 + f2 = +-F0 present."""
-    peaks = r["h1"]["peaks"]
-    if not peaks or not _near(max(peaks, key=lambda p: p["gain_db"])["freq_hz"]):
+    """The most prominent H2 ridge, and every ridge marked dominant, at f1 (+ f2) = +-F0."""
+    ridges = r["h2"]["ridges"]
+    if not ridges:
         return False
-    kinds = {(q["kind"], q["sign"]) for q in r["h2"]["ridges"] if _near(q["freq_hz"])}
-    return {("f1", 1), ("f1", -1), ("f1+f2", 1), ("f1+f2", -1)} <= kinds
+    best = max(ridges, key=lambda q: q["prominence_db"])
+    return _near(best["freq_hz"]) and all(_near(q["freq_hz"]) for q in ridges if q["dominant"])
 
 
 def test_models_ridges_validation_and_a_cogging_change(ros_context: Any) -> None:
@@ -91,14 +91,18 @@ def test_models_ridges_validation_and_a_cogging_change(ros_context: Any) -> None
     t_on = k_on / FS
     before = [r for r in ridges if r["window"]["end_stamp"] < t_on]
     assert len(before) == 12
-    # a 2 s window pins H1 at the tone; where its peak lands scatters by about +-1 Hz with
-    # the noise (measured over seeds 0-4 offline: 10, 7, 12, 10, 10 of 12 models within
-    # one step with all four H2 ridge lines): the median and two thirds are asserted
-    tops = sorted(max(r["h1"]["peaks"], key=lambda p: p["gain_db"])["freq_hz"]
-                  for r in before if r["h1"]["peaks"])
-    assert len(tops) == 12 and _near(tops[6])
-    good = [r["model_id"] for r in before if _ridge_ok(r)]
-    assert len(good) >= 8, [(r["model_id"], _summary(r)) for r in before]
+    # H1: the strongest peak of (nearly) every model sits at the resonance. H2 exists where
+    # the 15 terms include a nonlinear one (not on every window: the ripple is 5 % of the
+    # thrust); where it does, its strongest ridges are lines f1 = +-F0 or f1 + f2 = +-F0.
+    # Measured offline, seeds 0-3: H1 peak within a step in 11, 11, 11, 12 of 12 windows;
+    # H2 in 10, 11, 7, 12 of them, its ridges at F0 in 9, 8, 5, 12 of those.
+    tops = [max(r["h1"]["peaks"], key=lambda p: p["gain_db"])["freq_hz"]
+            for r in before if r["h1"]["peaks"]]
+    assert sum(_near(f) for f in tops) >= 10, tops
+    with_h2 = [r for r in before if r["h2"]["ridges"]]
+    assert len(with_h2) >= 6, [(r["model_id"], _summary(r)) for r in before]
+    good = [r for r in with_h2 if _ridge_ok(r)]
+    assert len(good) >= 2 / 3 * len(with_h2), [(r["model_id"], _summary(r)) for r in with_h2]
 
     xval = [v for v in validations if v["name"] == "identifier/cross_validation/speed"]
     pre = [v for v in xval if json.loads(v["values"]["validated_on"])["end_stamp"] < t_on]

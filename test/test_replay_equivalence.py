@@ -82,7 +82,8 @@ def test_replayed_bag_gives_the_offline_models(ros_context: Any, ros_env: int,
     for m in models:
         a, b = m["window"]["start_index"], m["window"]["stop_index"]
         st = m["structure"]
-        cfg = FitConfig(structure=Structure(st["ny"], st["nu"], st["degree"], st["delay"]))
+        cfg = FitConfig(structure=Structure(st["ny"], st["nu"], st["degree"], st["delay"]),
+                        method=m["method"])
         ref = identify_recording(rec, output=m["output"], config=cfg, estimate=(a, b),
                                  validate=None).to_dict()
         assert [t["name"] for t in m["terms"]] == [t["name"] for t in ref["terms"]], m["model_id"]
@@ -106,7 +107,8 @@ def test_replayed_bag_gives_the_offline_models(ros_context: Any, ros_env: int,
     a, b = last["window"]["start_index"], last["window"]["stop_index"]
     out = tmp_path / "identify.json"
     proc = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "identify", str(bag),
-                           "--estimate", f"{a}:{b}", "--no-validate", "--json", str(out)],
+                           "--estimate", f"{a}:{b}", "--no-validate", "--method",
+                           last["method"], "--json", str(out)],
                           env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     cli = json.loads(out.read_text())

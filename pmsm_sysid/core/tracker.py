@@ -18,8 +18,9 @@ samples before a feeding the lags, exactly as ``identify --estimate a:b`` does):
    them, seed §II.3). The tests on the new window are published beside, as information: a
    NARX model has no noise model, so coloured process noise shows there first.
 3. **Change features** (:mod:`.change`), judged for an output whose models reproduce their
-   own windows (median free-run R^2 of the recent windows >= ``min_r2``; otherwise the
-   window is ``unjudged``, e.g. a position model under the speed protocol): the new model's
+   own windows (median free-run R^2 of the recent windows >= ``change_min_r2``, 0.99;
+   otherwise the window is ``unjudged``: e.g. the free-integrator position of the nominal
+   motor under the speed protocol, R^2 about 0.92, whose features wander): the new model's
    free-run NRMSE on its own window (a window spanning a change fits worse); the
    out-of-sample error of the previous window's model on the ``hop`` newest samples (free
    run over the window, NRMSE of the new samples);
@@ -87,6 +88,7 @@ class TrackerConfig:
     window: int = 1000
     hop: int = 250
     min_r2: float = 0.9
+    change_min_r2: float = 0.99
     corr_max_lag: int = 20
     change: ChangeConfig = field(default_factory=ChangeConfig)
 
@@ -95,8 +97,10 @@ class TrackerConfig:
             raise DataError("the tracker needs at least one output")
         if self.window < 2 or self.hop < 1:
             raise DataError(f"need window >= 2 and hop >= 1 (got {self.window}, {self.hop})")
-        if not (math.isfinite(self.min_r2) and self.min_r2 <= 1):
-            raise DataError(f"min_r2 must be a number <= 1, got {self.min_r2}")
+        for name in ("min_r2", "change_min_r2"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value <= 1):
+                raise DataError(f"{name} must be a number <= 1, got {value}")
         if self.corr_max_lag < 1 or self.window < 4 * self.corr_max_lag:
             raise DataError(f"the correlation tests need window >= 4 x {self.corr_max_lag}")
 
@@ -124,7 +128,7 @@ def tracker_config(p: Mapping[str, Any]) -> TrackerConfig:
                           s_confirm=float(p["change.s_confirm"]),
                           holdoff=max(0, int(p["window"]) // max(1, int(p["hop"])) - 1))
     return TrackerConfig(tuple(cfgs), window=int(p["window"]), hop=int(p["hop"]),
-                         min_r2=float(p["min_r2"]),
+                         min_r2=float(p["min_r2"]), change_min_r2=float(p["change.min_r2"]),
                          change=change)
 
 
@@ -225,7 +229,8 @@ class WindowTracker:
         feats = self._features(track, w, model, y, u, est)
         r2 = est["r2"] if est["r2"] is not None and not est["free_run_diverged"] else -math.inf
         track.r2.append(float(r2))
-        monitored = len(track.r2) >= 3 and float(np.median(track.r2)) >= self.config.min_r2
+        monitored = (len(track.r2) >= 3
+                     and float(np.median(track.r2)) >= self.config.change_min_r2)
         decision = track.detector.update(w.seq, feats if monitored else {})
         if decision.changed:
             track.ref_freq = None
