@@ -142,7 +142,7 @@ class ChangeDetector:
         self._prev_score = 0.0
         self._since_reset = 0
         self._settle = 0
-        self.events: list[ChangeDecision] = []
+        self.events: deque[ChangeDecision] = deque(maxlen=100)  # the latest changes
 
     def update(self, seq: int, values: Mapping[str, float]) -> ChangeDecision:
         """Judge window ``seq`` from its feature ``values`` (unknown names are ignored)."""

@@ -2,7 +2,8 @@
 
 Subscribes to ``/pmsm_sysid/model``, ``ridges``, ``validation`` and ``change`` (all sporadic:
 one message per window) and keeps, per output, the last model, ridges and validation
-statuses, plus every change event (bounded). ``run --json`` reports from it, so a process
+statuses, plus the last ``keep_models`` models, ridges and validations and the last 200
+change events (bounded memory in long runs). ``run --json`` reports from it, so a process
 that only runs the identification side (``--nodes identifier,gfrf``) reports the same way
 as the one-process pipeline, and models can be compared across processes by ``model_id``.
 """
@@ -28,7 +29,7 @@ class ResultCollector(Node):
     """Latest model/ridges/validation per output and the change events, from the topics."""
 
     def __init__(self, *, context: Context | None = None, node_name: str = "pmsm_results",
-                 keep_models: int = 4096) -> None:
+                 keep_models: int = 256) -> None:
         super().__init__(node_name, context=context)
         self.models: dict[str, dict[str, Any]] = {}
         self.model_log: deque[dict[str, Any]] = deque(maxlen=keep_models)
