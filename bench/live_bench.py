@@ -192,7 +192,8 @@ def main() -> int:
     p.add_argument("--fast-duration", type=float, default=None,
                    help="phase 2 seconds (default: half of --duration)")
     p.add_argument("--fast-rate", type=float, default=5000.0, help="phase 2 input rate (Hz)")
-    p.add_argument("--method", choices=("iofr", "ofr"), default="iofr")
+    p.add_argument("--method", choices=("iofr", "ofr"), default=None,
+                   help="term selection (default: the identifier node's, ofr)")
     p.add_argument("--skip-fast", action="store_true", help="run phase 1 only")
     p.add_argument("--json", help="write the results as JSON")
     args = p.parse_args()
@@ -200,6 +201,10 @@ def main() -> int:
     os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 90))
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.setdefault("ROS_LOG_DIR", tempfile.mkdtemp(prefix="live_bench_log_"))
+    if args.method is None:
+        from pmsm_sysid.nodes.identifier_node import DEFAULTS
+
+        args.method = DEFAULTS["method"]
     results = {"method": args.method, "cpu_count": os.cpu_count(),
                "load_avg_at_start": os.getloadavg()}
     results["realtime_500hz"] = phase_realtime(args.duration, args.method)

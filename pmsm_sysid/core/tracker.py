@@ -23,7 +23,8 @@ samples before a feeding the lags, exactly as ``identify --estimate a:b`` does):
    motor under the speed protocol, R^2 about 0.92, whose features wander): the new model's
    free-run NRMSE on its own window (a window spanning a change fits worse); the
    out-of-sample error of the previous window's model on the ``hop`` newest samples (free
-   run over the window, NRMSE of the new samples);
+   run over the window, NRMSE of the new samples; like the next feature, only when that
+   window was fitted, not after skipped windows);
    the gain and phase of the new model's H1 (seed Eq. 7) at the reference excitation
    frequency f0 (the strongest input line of the first window after a (re)start; the phase
    relative to its value there, wrapped to (-pi, pi]); the Jaccard distance between
@@ -167,6 +168,7 @@ class _OutputTrack:
         self.cfg = cfg
         self.detector = ChangeDetector(CHANGE_FEATURES, tc.change)
         self.previous: NarxModel | None = None
+        self.previous_stop: int | None = None
         self.ref_freq: float | None = None
         self.ref_phase: float | None = None
         self.r2: deque[float] = deque(maxlen=tc.change.baseline)
@@ -243,7 +245,7 @@ class WindowTracker:
         val = model_json["validation"]
         track.held.append(_Held(model, model_json["model_id"], w.stop_index, info,
                                 val["correlation_tests"], bool(val["correlation_all_pass"])))
-        track.previous = model
+        track.previous, track.previous_stop = model, w.stop_index
 
     # -- pieces -----------------------------------------------------------------------
     def _series(self, w: Window, cfg: OutputConfig) -> tuple[FloatArray, FloatArray]:
@@ -317,7 +319,8 @@ class WindowTracker:
         feats["harmonics_db"] = harmonics_db(y[len(y) - len(u_win):], dominant_frequency(u_win))
         nrmse = est["nrmse"]
         feats["fit_nrmse"] = math.inf if nrmse is None or est["free_run_diverged"] else nrmse
-        if track.previous is not None:
+        if track.previous is not None and track.previous_stop == w.stop_index - self.config.hop:
+            # only against the model of the window just before (not across skipped windows)
             feats["xval_nrmse"] = newest_error(track.previous, y, u, self.config.hop)
             feats["term_jaccard"] = jaccard_distance(model.term_names, track.previous.term_names)
         return feats
