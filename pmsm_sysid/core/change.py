@@ -9,8 +9,10 @@ it. For every feature a running baseline over the last ``baseline`` windows give
 centre (median) and scale (1.4826 x MAD, never below an absolute and a relative floor), and
 the window's robust z-score.
 
-Decision: a change is reported at window j when some feature has z >= ``z_fire`` (one
-window, a jump no stationary run shows), or when the combined score S = sqrt(sum z_k^2) over
+Decision: a change is reported at window j when some two-sided feature (a property of the
+model: gain, phase, harmonic content) has z >= ``z_fire`` (one window, a jump no stationary
+run shows; error-like one-sided features are heavy-tailed — one bad fit — and never decide
+alone), or when the combined score S = sqrt(sum z_k^2) over
 the window's features (each z clipped to [0, ``z_cap``]: errors count only when they grow) is
 >= ``s_confirm`` at both j and j-1 (a persistent shift seen by several features at once, or
 strongly by one). With six features S is about 2.4 on a stationary plant. After a change
@@ -24,8 +26,8 @@ Calibration (paper protocol, 1000-sample windows, hop 250, speed and position mo
 and iOFR, outputs monitored as :mod:`.tracker` gates them): over 155-window stationary runs
 of the noisy nominal motor and of a motor resonant at 16.5 Hz, S stayed below 5.7 on two
 consecutive windows and no change was reported; cogging (plants/cogging.yaml) switched on
-was reported 2-3 windows after the first window holding cogging data, 0.5 kg of payload in
-the first. ``test/test_change.py`` repeats shorter versions of both.
+was reported 2-3 windows after the first window holding cogging data, 0.5 kg of payload
+1-2 windows after. ``test/test_change.py`` repeats shorter versions of both.
 """
 
 from __future__ import annotations
@@ -159,7 +161,8 @@ class ChangeDetector:
             return ChangeDecision(seq, "learning", values=vals)
         z = {k: self._base[k].z(v, self.features[k].one_sided) for k, v in vals.items()}
         score = combined_score(z, cfg.z_cap)
-        fire = sorted(k for k, s in z.items() if math.isfinite(s) and s >= cfg.z_fire)
+        fire = sorted(k for k, s in z.items() if math.isfinite(s) and s >= cfg.z_fire
+                      and not self.features[k].one_sided)
         persistent = score >= cfg.s_confirm and self._prev_score >= cfg.s_confirm
         self._prev_score = score
         if fire or persistent:
