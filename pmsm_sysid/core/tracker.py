@@ -17,14 +17,15 @@ samples before a feeding the lags, exactly as ``identify --estimate a:b`` does):
    on the model's estimation residuals (the model validity tests as Billings & Voon define
    them, seed §II.3). The tests on the new window are published beside, as information: a
    NARX model has no noise model, so coloured process noise shows there first.
-3. **Change features** (:mod:`.change`), judged for an output whose models reproduce their
-   own windows (median free-run R^2 of the recent windows >= ``change_min_r2``, 0.99;
+3. **Change features** (:mod:`.change`), judged for a window that directly follows the
+   previous fitted one (when fits cannot keep up and windows are skipped, detection pauses:
+   the stream of models it is calibrated on has holes) of an output whose models reproduce
+   their own windows (median free-run R^2 of the recent windows >= ``change_min_r2``, 0.99;
    otherwise the window is ``unjudged``: e.g. the free-integrator position of the nominal
    motor under the speed protocol, R^2 about 0.92, whose features wander): the new model's
    free-run NRMSE on its own window (a window spanning a change fits worse); the
    out-of-sample error of the previous window's model on the ``hop`` newest samples (free
-   run over the window, NRMSE of the new samples; like the next feature, only when that
-   window was fitted, not after skipped windows);
+   run over the window, NRMSE of the new samples);
    the gain and phase of the new model's H1 (seed Eq. 7) at the reference excitation
    frequency f0 (the strongest input line of the first window after a (re)start; the phase
    relative to its value there, wrapped to (-pi, pi]); the Jaccard distance between
@@ -231,7 +232,8 @@ class WindowTracker:
         feats = self._features(track, w, model, y, u, est)
         r2 = est["r2"] if est["r2"] is not None and not est["free_run_diverged"] else -math.inf
         track.r2.append(float(r2))
-        monitored = (len(track.r2) >= 3
+        follows = track.previous_stop == w.stop_index - self.config.hop
+        monitored = (follows and len(track.r2) >= 3
                      and float(np.median(track.r2)) >= self.config.change_min_r2)
         decision = track.detector.update(w.seq, feats if monitored else {})
         if decision.changed:
@@ -320,7 +322,6 @@ class WindowTracker:
         nrmse = est["nrmse"]
         feats["fit_nrmse"] = math.inf if nrmse is None or est["free_run_diverged"] else nrmse
         if track.previous is not None and track.previous_stop == w.stop_index - self.config.hop:
-            # only against the model of the window just before (not across skipped windows)
             feats["xval_nrmse"] = newest_error(track.previous, y, u, self.config.hop)
             feats["term_jaccard"] = jaccard_distance(model.term_names, track.previous.term_names)
         return feats
