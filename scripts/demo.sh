@@ -7,9 +7,9 @@ mkdir -p "$OUT"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}
 step() { printf '\n== %s\n' "$*"; }
 
-step "1/5 live pipeline: simulated motor + identifier + GFRF in one process (10 s)"
+step "1/5 live pipeline: simulated motor (paper bench: Table 1 + sensor noise) + identifier + GFRF in one process (10 s)"
 rm -rf "$OUT/live_bag"
-$CLI run --duration 10 --record "$OUT/live_bag" --json "$OUT/run.json"
+$CLI run --plant paper_bench --duration 10 --record "$OUT/live_bag" --json "$OUT/run.json"
 
 step "2/5 offline identification of the bundled recording (paper's speed protocol)"
 $CLI identify bags/paper_speed_nominal --json "$OUT/identify.json"
@@ -23,7 +23,7 @@ $CLI diagnose --plant plants/nominal.yaml --real bags/paper_speed_cogging --json
 step "5/5 report"
 if $CLI report --help >/dev/null 2>&1; then
   $CLI report "$OUT/identify.json" --out "$OUT/report"
-  echo "report: $(pwd)/$OUT/report/index.html"
+  $CLI report "$OUT/diagnose.json" --out "$OUT/diagnose_report"
 fi
 echo
 echo "demo outputs in $(pwd)/$OUT"
