@@ -241,6 +241,11 @@ class MotorSimNode(Node):
         """Stop the node's own pacing; the caller then publishes with :meth:`step`."""
         self._timer.cancel()  # type: ignore[no-untyped-call]
 
+    def start_timer(self) -> None:
+        """(Re)start the node's own pacing from now (after :meth:`stop_timer`)."""
+        self._pace_start = (time.monotonic(), self.published)
+        self._timer.reset()  # type: ignore[no-untyped-call]
+
     def _timer_period(self) -> float:
         """1/fs on the wall clock; rate 0: 0 (one callback per executor round); else
         1/(rate fs), at least 0.5 ms (several samples per callback beyond 2 kHz)."""
