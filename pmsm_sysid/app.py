@@ -126,9 +126,15 @@ class Pipeline:
             sim.step(burst if limit is None else min(burst, limit - sim.published))
 
     def finish(self, timeout_s: float = 30.0) -> None:
-        """Fit what is queued and publish it, let the GFRF node analyse the last models, and
-        let this process's collector receive the results (each step bounded by timeout_s)."""
+        """Let other processes acknowledge the sim's last samples, fit what is queued and
+        publish it, let the GFRF node analyse the last models, and let this process's
+        collector receive the results (each step bounded)."""
         ident, g = self.identifier, self.gfrf
+        if self.sim is not None:  # reliable delivery of the last samples to other processes
+            from rclpy.duration import Duration
+
+            for pub in self.sim.publishers:
+                pub.wait_for_all_acked(Duration(seconds=min(timeout_s, 2.0)))
         if ident is not None:
             ident.engine.flush()
             ident.engine.wait_idle(timeout_s)
@@ -199,12 +205,17 @@ def build_pipeline(
     namespace: str = DEFAULT_NAMESPACE, record: str | None = None,
     identifier_params: Mapping[str, Any] | None = None,
     sim_params: Mapping[str, Any] | None = None, gfrf_params: Mapping[str, Any] | None = None,
-    context: Context | None = None, domain_id: int | None = None,
+    context: Context | None = None, domain_id: int | None = None, wait_s: float = 0.0,
 ) -> Iterator[Pipeline]:
-    """Create ``nodes`` in one process and yield the :class:`Pipeline` (see module doc)."""
+    """Create ``nodes`` in one process and yield the :class:`Pipeline` (see module doc).
+
+    ``wait_s``: with the sim node but no identifier here, wait up to that long for another
+    process to subscribe to the input topics before the sim starts (0 = start at once).
+    """
     from .rosutil import ros_session
 
-    names = parse_nodes(nodes)
+    # the identifier last: its input subscriptions appear just before the executor spins
+    names = tuple(sorted(parse_nodes(nodes), key=lambda n: n == "identifier"))
     if clock not in ("wall", "sim"):
         raise SysIdError(f"clock must be 'wall' or 'sim', got '{clock}'")
     opts = {"plant": plant, "excitation": excitation, "seed": seed, "namespace": namespace,
@@ -215,18 +226,20 @@ def build_pipeline(
         made: dict[str, Any] = {}
         pipe = Pipeline(ctx, executor, made, clock)
         try:
+            if record is not None:  # first: it records from the first sample on
+                pipe.recorder = _recorder(ctx, executor, record, namespace, made)
+            if "identifier" in names or "gfrf" in names:
+                from .nodes.collector import ResultCollector
+
+                made["collector"] = ResultCollector(context=ctx)
+                executor.add_node(made["collector"])
             for name in names:
                 made[name] = _make_checked(name, ctx, opts)
                 executor.add_node(made[name])
             if pipe.stepped:
                 pipe.sim.stop_timer()  # stepped by the pipeline (back-pressure)
-            if "identifier" in made or "gfrf" in made:
-                from .nodes.collector import ResultCollector
-
-                made["collector"] = ResultCollector(context=ctx)
-                executor.add_node(made["collector"])
-            if record is not None:
-                pipe.recorder = _recorder(ctx, executor, record, namespace, made)
+            elif pipe.sim is not None and wait_s > 0 and "identifier" not in names:
+                _wait_until_matched(pipe.sim, executor, namespace, wait_s)
             pipe.started = time.monotonic()
             yield pipe
         finally:
@@ -245,6 +258,27 @@ def _context(context: Context | None, domain_id: int | None,
         yield context, executor
     finally:
         executor.shutdown(timeout_sec=2.0)
+
+
+def _wait_until_matched(sim: Any, executor: SingleThreadedExecutor, namespace: str,
+                        wait_s: float) -> bool:
+    """Hold the sim node until each of its input publishers is matched by a subscriber in
+    another process (or ``wait_s`` passes), then start it: nothing is published into the
+    void while the two processes discover each other."""
+    from .topics import INPUT_TYPES, input_topic
+
+    topics = {input_topic(namespace, s) for s in INPUT_TYPES}
+    pubs = [p for p in sim.publishers if p.topic_name in topics]
+    sim.stop_timer()
+    try:
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline and sim.context.ok():
+            if all(p.get_subscription_count() > 0 for p in pubs):
+                return True
+            executor.spin_once(timeout_sec=0.1)
+        return False
+    finally:
+        sim.start_timer()
 
 
 def _recorder(ctx: Context, executor: SingleThreadedExecutor, path: str, namespace: str,
@@ -295,7 +329,7 @@ def pipeline_summary(pipe: Pipeline) -> dict[str, Any]:
     ident, gfrf, sim = pipe.identifier, pipe.gfrf, pipe.sim
     col = pipe.nodes.get("collector")
     out: dict[str, Any] = {
-        "nodes": [n for n in pipe.nodes if n in NODES], "clock": pipe.clock,
+        "nodes": [n for n in NODES if n in pipe.nodes], "clock": pipe.clock,
         "wall_time_s": time.monotonic() - pipe.started,
         "samples_published": sim.published if sim is not None else None,
     }

@@ -180,7 +180,7 @@ def _simulate(plant: Any, n: int, seed: int, change_at: int | None = None,
         if k == change_at:
             sim.set_plant(after)
         out[k, 1:] = sim.measure()
-        out[k, 0] = u[k]
+        out[k, 0] = sim.measured_thrust(u[k])  # what the thrust sensor records
         sim.advance(u[k])
     return out
 

@@ -76,7 +76,9 @@ def test_sigterm_mid_run_finalises_the_recording(ros_env: int, tmp_path: Path) -
     assert sum(counts.values()) == s["recorded_messages"]
     rec = read_recording(bag)
     n = len(rec.recording)
-    assert n >= 1000 and n == counts["/pmsm/thrust"] == counts["/pmsm/speed"]
+    inputs = [counts[f"/pmsm/{s}"] for s in ("thrust", "speed", "position")]
+    # stopped between the three messages of a sample: at most the last sample is partial
+    assert n >= 1000 and max(inputs) - min(inputs) <= 3 and min(inputs) - 3 <= n <= min(inputs)
     assert counts.get("/pmsm_sysid/model", 0) == s["models_published"] >= 2
 
 

@@ -12,7 +12,7 @@ EPILOG = """\
 examples:
   pmsm-sysid run --duration 10 --json run.json            # real time, 10 s
   pmsm-sysid run --clock sim --duration 30 --json -       # 30 s of data, as fast as it fits
-  pmsm-sysid run --nodes sim --clock sim --rate 2         # motor side only (other host)
+  pmsm-sysid run --nodes sim --clock sim --wait 30        # motor side only (other host)
   pmsm-sysid run --nodes identifier,gfrf --duration 60    # identification side only
 --duration counts seconds of data (duration x 500 samples) when the sim node runs in this
 process, in either clock; wall-clock seconds otherwise. Without it the run lasts until
@@ -40,6 +40,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rate", type=float, default=1.0, metavar="R",
                    help="with --clock sim and no identifier here: R x real time (0 = max)")
     p.add_argument("--namespace", default="/pmsm", help="input topic namespace")
+    p.add_argument("--wait", type=float, default=0.0, metavar="S",
+                   help="--nodes sim without identifier: wait up to S s for a subscriber "
+                        "on the input topics before the first sample (default 0)")
     p.add_argument("--window", type=int, default=None, help="samples per fit (default 1000)")
     p.add_argument("--hop", type=int, default=None, help="samples between fits (default 250)")
     p.add_argument("--method", choices=("iofr", "ofr"), default=None,
@@ -91,6 +94,8 @@ def _check(args: argparse.Namespace) -> None:
         raise SysIdError(f"--rate must be >= 0, got {args.rate}")
     if args.rate != 1.0 and args.clock != "sim":
         raise SysIdError("--rate applies to --clock sim only")
+    if not args.wait >= 0:
+        raise SysIdError(f"--wait must be >= 0, got {args.wait}")
 
 
 def _headline(s: dict[str, Any]) -> str:
@@ -126,9 +131,12 @@ def run(args: argparse.Namespace) -> int:
     plant = load_plant(args.plant) if args.plant else None
     with build_pipeline(nodes, plant=plant, excitation=args.excitation, seed=args.seed,
                         clock=args.clock, rate=args.rate, namespace=args.namespace,
-                        record=args.record, identifier_params=params["identifier"],
+                        record=args.record, wait_s=args.wait,
+                        identifier_params=params["identifier"],
                         sim_params=params["sim"], gfrf_params=params["gfrf"]) as pipe, \
             stop_on_signals(pipe.stop):
+        print(f"pmsm-sysid run: running {', '.join(nodes)} (Ctrl-C to stop)", file=sys.stderr,
+              flush=True)
         pipe.run(args.duration)
         stopped = pipe.stop.is_set()
         pipe.stop.clear()
