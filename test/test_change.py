@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 from typing import Any
 
 import numpy as np
@@ -41,7 +42,8 @@ def test_no_false_alarm_over_a_long_stationary_run(seed: int) -> None:
     decisions = [det.update(i, f) for i, f in enumerate(_stream(5000, seed))]
     assert [d.seq for d in decisions if d.changed] == []
     assert decisions[0].state == "learning" and decisions[-1].state == "steady"
-    assert max(max(d.z.values(), default=0) for d in decisions) < ChangeConfig().z_fire
+    scores = [d.score for d in decisions]
+    assert max(min(a, b) for a, b in pairwise(scores)) < ChangeConfig().s_confirm
 
 
 @pytest.mark.parametrize("feature,delta", [("err", 0.5), ("err", 0.2), ("gain_db", -3.0)])
@@ -82,7 +84,7 @@ def test_a_single_moderate_outlier_needs_confirmation() -> None:
     for i, f in enumerate(stream[:60]):
         det.update(i, f)
     med, scale = det._base["gain_db"].centre_scale()
-    one = dict(stream[60], gain_db=med + 10 * scale)  # score over s_confirm, z under z_fire
+    one = dict(stream[60], gain_db=med + 10 * scale)  # score over s_confirm, one window
     d = det.update(60, one)
     assert d.state == "steady" and d.score >= ChangeConfig().s_confirm
     assert det.update(61, stream[61]).state == "steady"  # not persistent: forgotten
@@ -143,7 +145,7 @@ def test_bad_config_is_rejected() -> None:
     with pytest.raises(DataError):
         ChangeConfig(warmup=2)
     with pytest.raises(DataError):
-        ChangeConfig(z_fire=0)
+        ChangeConfig(s_confirm=0)
     with pytest.raises(DataError):
         ChangeConfig(holdoff=-1)
     with pytest.raises(DataError):

@@ -126,7 +126,6 @@ def tracker_config(p: Mapping[str, Any]) -> TrackerConfig:
                                               criterion=str(p["criterion"]),
                                               method=str(p["method"]))))
     change = ChangeConfig(baseline=int(p["change.baseline"]), warmup=int(p["change.warmup"]),
-                          z_fire=float(p["change.z_fire"]),
                           s_confirm=float(p["change.s_confirm"]),
                           holdoff=max(0, int(p["window"]) // max(1, int(p["hop"])) - 1))
     return TrackerConfig(tuple(cfgs), window=int(p["window"]), hop=int(p["hop"]),

@@ -53,7 +53,7 @@ DEFAULTS: dict[str, Any] = {
     "outputs": ["speed", "position"], "method": "ofr", "criterion": "terms",
     "speed.ny": 30, "speed.nu": 40, "speed.degree": 2, "speed.delay": 1, "speed.terms": 15,
     "position.ny": 10, "position.nu": 10, "position.degree": 2, "position.delay": 1,
-    "position.terms": 15, "min_r2": 0.9, "change.z_fire": 12.0, "change.s_confirm": 7.0,
+    "position.terms": 15, "min_r2": 0.9, "change.s_confirm": 7.0,
     "change.baseline": 24, "change.warmup": 8, "change.min_r2": 0.99,
     "publish_period_s": 0.05,
 }
