@@ -281,20 +281,25 @@ class _Publisher:
             self.pubs[s].publish(msgs[s])
 
 
-def _stream(ex: Any, ident: Any, pub: _Publisher, first_index: int, data: Any,
-            chunk: int = 100) -> None:
+def _stream(ex: Any, ident: Any, mon: Any, ns: str, pub: _Publisher, first_index: int,
+            data: Any, chunk: int = 100) -> None:
     """Publish ``data`` (u, y, x rows) chunk by chunk; after each chunk spin until the
-    identifier has every message and the fitting thread is idle (no window skipped)."""
+    identifier and the monitor have every message and the fitting thread is idle (no
+    window skipped)."""
+    def monitored() -> int:
+        return sum(mon.stats[f"{ns}/{sig}"].count for sig in SIGNALS)
+
     for a in range(0, len(data), chunk):
         for k, (u, y, x) in enumerate(data[a : a + chunk], start=first_index + a):
             pub.publish(k * 2_000_000, u, y, x)
-        want = ident.engine.stats.messages + 3 * len(data[a : a + chunk])
+        n = 3 * len(data[a : a + chunk])
+        want, want_mon = ident.engine.stats.messages + n, monitored() + n
         deadline = time.monotonic() + 30
-        while ident.engine.stats.messages < want:
-            assert time.monotonic() < deadline, "identifier did not receive the chunk"
+        while ident.engine.stats.messages < want or monitored() < want_mon:
+            assert time.monotonic() < deadline, "identifier or monitor did not get the chunk"
             ex.spin_once(timeout_sec=0.01)
         assert ident.engine.wait_idle(30)
-        ex.spin_once(timeout_sec=0.01)
+        ident.publish_results()  # what the node's timer does (also called at shutdown)
 
 
 @pytest.mark.ros
@@ -342,7 +347,7 @@ def test_identifier_node_survives_failing_fits_a_silent_and_a_restarted_publishe
         while not all(p.get_subscription_count() >= 2 for p in first.pubs.values()):
             assert time.monotonic() < deadline, "no match"
             ex.spin_once(timeout_sec=0.05)
-        _stream(ex, ident, first, 500, rows[:1200])  # windows end at sample 999..1599: 4
+        _stream(ex, ident, mon, ns, first, 500, rows[:1200])  # windows end at sample 999..1599: 4
         s = ident.summary()
         assert s["windows_due"] == 4 and s["windows_failed"] == 1 and s["windows_skipped"] == 0
         assert ident.models_published == 2
@@ -350,6 +355,7 @@ def test_identifier_node_survives_failing_fits_a_silent_and_a_restarted_publishe
         assert any("IdentificationError: injected identification failure" in e
                    for e in s["errors"])
         # the publisher goes away: the node keeps spinning, the monitor reports the silence
+        assert [mon.stats[f"{ns}/{sig}"].count for sig in SIGNALS] == [1200] * 3
         ex.remove_node(first.node)
         first.node.destroy_node()
         quiet_from = time.monotonic()
@@ -364,7 +370,7 @@ def test_identifier_node_survives_failing_fits_a_silent_and_a_restarted_publishe
         while not all(p.get_subscription_count() >= 2 for p in second.pubs.values()):
             assert time.monotonic() < deadline + 20, "no match"
             ex.spin_once(timeout_sec=0.05)
-        _stream(ex, ident, second, 500 + 1200 + 5000, rows[1200:])
+        _stream(ex, ident, mon, ns, second, 500 + 1200 + 5000, rows[1200:])
         s = ident.summary()
         assert (s["gaps"], s["samples_missing"], s["samples_received"]) == (1, 5000, 2400)
         assert s["windows_due"] == 8 and ident.models_published == 6

@@ -14,7 +14,8 @@
   still made (it is the paper's single-tone protocol) but a warning says so: input-lag terms
   are then not unique and the model only describes responses to inputs like this one.
 * Values so large that the selection sums overflow float64 ((p^T y)^2 ~ n^2 x^(2d+2) for a
-  degree-d regressor p, beyond 1e300) -> DataError naming the signal: rescale it.
+  degree-d regressor p, beyond 1e300), or so small that they underflow (below 1e-300) ->
+  DataError naming the signal: rescale it.
 * A signal that sits at its extreme value in >= 1 % of the samples (and takes more than 16
   distinct values, so two-level inputs are exempt) -> a warning: saturated or clipped data
   are not what drove, or came out of, the plant.
@@ -79,6 +80,9 @@ def _magnitude(signals: dict[str, FloatArray], degree: int) -> None:
     if peak > 0 and (2 * degree + 2) * np.log10(peak) + 2 * np.log10(n) > OVERFLOW_LOG10:
         raise DataError(f"'{name}' reaches {peak:.3g}: too large for a degree-{degree} model "
                         "(its regressor sums overflow float64); rescale the signal")
+    if peak > 0 and (2 * degree + 2) * np.log10(peak) < -OVERFLOW_LOG10:
+        raise DataError(f"the signals reach only {peak:.3g}: too small for a degree-{degree} "
+                        "model (its regressor sums underflow float64); rescale them")
 
 
 def saturation(name: str, x: FloatArray) -> str | None:

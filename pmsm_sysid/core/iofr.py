@@ -230,6 +230,9 @@ def iofr(
     path = frols(proj, y, 2 * n_terms, remove_dc=remove_dc, constant_index=constant_index,
                  keep_basis=True, init=st0)
     n_fixed = 1 if remove_dc else 0
+    if len(path.selected) <= n_fixed:
+        raise IdentificationError("no candidate term is usable on these data: every candidate "
+                                  "is zero or linearly dependent")
     size = _target_size(path, n_terms, criterion, rho, len(y))
     pb = _Problem(proj, st0, constant_index, path)
     pruned = _prune(pb, [int(j) for j in path.selected[n_fixed : n_fixed + 2 * size]], size)
