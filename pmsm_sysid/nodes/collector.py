@@ -30,7 +30,8 @@ class ResultCollector(Node):
 
     def __init__(self, *, context: Context | None = None, node_name: str = "pmsm_results",
                  keep_models: int = 256) -> None:
-        super().__init__(node_name, context=context)
+        # no parameters to serve: fewer entities in every wait of the shared executor
+        super().__init__(node_name, context=context, start_parameter_services=False)
         self.models: dict[str, dict[str, Any]] = {}
         self.model_log: deque[dict[str, Any]] = deque(maxlen=keep_models)
         self.ridges: dict[str, dict[str, Any]] = {}
