@@ -55,7 +55,7 @@ from .change import (
 from .errors import DataError, SysIdError
 from .gfrf import Gfrf
 from .identifiability import excitation_summary
-from .identify import METHODS, FitConfig, fit_narx, validate_narx
+from .identify import METHODS, FitConfig, IdentifyResult, fit_narx, validate_narx
 from .model import NarxModel, Structure
 from .online import NS_PER_S, Window
 from .prediction import one_step_ahead, simulate
@@ -258,24 +258,18 @@ class WindowTracker:
 
     def _fit(self, cfg: OutputConfig, y: FloatArray, u: FloatArray, fs: float,
              info: dict[str, Any]) -> tuple[dict[str, Any], NarxModel]:
+        """Fit and self-validate one output; the JSON is :class:`IdentifyResult`'s (the
+        ``identify`` verb's, ``estimate`` = the window's sample indices) plus the window."""
         t0 = time.perf_counter()
         fit = fit_narx(y, u, cfg.fit, fs, input_name=cfg.input, output_name=cfg.output)
         report = validate_narx(fit.model, y, u, max_lag=self.config.corr_max_lag)
-        st = cfg.fit.structure
-        model_id = f"{cfg.output}/{info['seq']}"
-        out = {
-            "input": cfg.input, "output": cfg.output, "sample_rate_hz": fs,
-            "structure": {"ny": st.ny, "nu": st.nu, "degree": st.degree, "delay": st.delay,
-                          "constant": st.constant, "n_candidates": fit.n_candidates},
-            "method": fit.method, "criterion": fit.criterion, "dc_removed": fit.dc_removed,
-            "terms": fit.model.terms_json(), "sum_err": fit.sum_err,
-            "greedy_terms": list(fit.greedy_terms), "n_swaps": fit.n_swaps,
-            "validation": report.to_dict(),
-            "excitation": excitation_summary(u[st.max_lag:], fs).to_dict(),
-            "timing_ms": fit.timing_ms,
-            "window": info, "model_id": model_id,
-            "fit_time_ms": 1e3 * (time.perf_counter() - t0),
-        }
+        lag = cfg.fit.structure.max_lag
+        result = IdentifyResult(
+            input=cfg.input, output=cfg.output, sample_rate_hz=fs, fit=fit, validation=report,
+            estimate=(info["start_index"], info["stop_index"]), validate=None,
+            excitation=excitation_summary(u[lag:], fs).to_dict(), timing_ms=fit.timing_ms)
+        out = {**result.to_dict(), "window": info, "model_id": f"{cfg.output}/{info['seq']}",
+               "fit_time_ms": 1e3 * (time.perf_counter() - t0)}
         return out, fit.model
 
     def _cross_validate(self, track: _OutputTrack, w: Window, y: FloatArray,
