@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, event, given, settings
+from hypothesis import HealthCheck, assume, event, example, given, settings
 from hypothesis import strategies as st
 from reliability_helpers import write_messages
 
@@ -139,8 +139,19 @@ def fit_problems(draw: Any) -> tuple[np.ndarray, np.ndarray, FitConfig]:
     return y, u, config
 
 
+# found by this test: iOFR's AIC resize once added a term beyond --terms (the maximum)
+_AIC_CAP = (np.r_[[-1.0] * 31, 0.0], np.r_[[-1.0] * 29, 0.0, 1.0, -1.0],
+            FitConfig(structure=Structure(ny=0, nu=1, degree=2), n_terms=1, criterion="aic"))
+# ... and a path with no usable candidate raised numpy's ValueError
+_NOTHING = (np.array([0.0, 0.0, 0.0, 1.0]), np.array([0.0, 0.0, 0.0, 1.0]),
+            FitConfig(structure=Structure(ny=0, nu=1, degree=1, constant=False), n_terms=1,
+                      criterion="aic", remove_dc=False))
+
+
 @settings(SETTINGS, max_examples=80)
 @given(problem=fit_problems())
+@example(problem=_AIC_CAP)
+@example(problem=_NOTHING)
 def test_ofr_on_random_finite_data(problem: tuple[np.ndarray, np.ndarray, FitConfig]) -> None:
     y, u, config = problem
     with warnings.catch_warnings():

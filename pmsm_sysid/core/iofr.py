@@ -132,8 +132,10 @@ def _exchange(pb: _Problem, free: list[int], max_swaps: int) -> tuple[list[int],
     return free, n_swaps
 
 
-def _resize(pb: _Problem, free: list[int], n_obs: int, kind: str, n_fixed: int) -> bool:
-    """Drop or add one term if that lowers AIC/BIC; return True if the set changed."""
+def _resize(pb: _Problem, free: list[int], n_obs: int, kind: str, n_fixed: int,
+            max_free: int) -> bool:
+    """Drop or add one term if that lowers AIC/BIC (never beyond ``max_free`` terms besides
+    the constant: ``n_terms`` is the maximum); return True if the set changed."""
     sw = pb.swaps(free)
     n = len(free) + n_fixed
     i_rm, j_add = int(np.argmin(sw.remove)), int(np.argmin(sw.add))
@@ -145,7 +147,7 @@ def _resize(pb: _Problem, free: list[int], n_obs: int, kind: str, n_fixed: int) 
     if best == 1 and ic[1] < ic[0]:
         del free[i_rm]
         return True
-    if best == 2 and ic[2] < ic[0] and n + 1 < n_obs:
+    if best == 2 and ic[2] < ic[0] and n + 1 < n_obs and len(free) < max_free:
         free.append(j_add)
         return True
     return False
@@ -241,7 +243,7 @@ def iofr(
     free, n_swaps = _exchange(pb, free, max_swaps)
     n_resizes = 0
     while criterion in ("aic", "bic") and n_resizes < n_terms and n_swaps < max_swaps:
-        if not _resize(pb, free, len(y), criterion, n_fixed):
+        if not _resize(pb, free, len(y), criterion, n_fixed, n_terms):
             break
         n_resizes += 1
         free, more = _exchange(pb, free, max_swaps - n_swaps)
