@@ -132,7 +132,7 @@ class CorrelationTests:
 def xcorr(a: FloatArray, b: FloatArray, lags: IntArray) -> FloatArray:
     """phi_ab(tau) = sum_k a(k) b(k+tau) / sqrt(sum a^2 sum b^2) for each tau (any sign)."""
     n = len(a)
-    norm = float(np.sqrt(np.dot(a, a) * np.dot(b, b)))
+    norm = float(np.linalg.norm(a) * np.linalg.norm(b))  # not sqrt(a.a * b.b): overflows
     out = np.zeros(len(lags))
     if not norm > 0:
         return out
