@@ -334,7 +334,8 @@ def pipeline_summary(pipe: Pipeline) -> dict[str, Any]:
         "samples_published": sim.published if sim is not None else None,
     }
     keys = ("samples_received", "samples_dropped", "samples_missing", "unaligned",
-            "out_of_order", "duplicates", "windows_due", "windows_fitted", "windows_skipped",
+            "out_of_order", "duplicates", "clock_restarts", "rate_changes", "windows_due",
+            "windows_fitted", "windows_skipped",
             "windows_failed", "fit_latency_p50_ms", "fit_latency_p99_ms", "fit_cpu_s")
     stats = ident.engine.stats.to_dict() if ident is not None else {}
     out.update({k: stats.get(k) for k in keys})

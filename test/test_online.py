@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from itertools import pairwise
 
 import numpy as np
 import pytest
@@ -103,8 +104,10 @@ def test_late_message_beyond_tolerance_is_out_of_order() -> None:
     msgs = _messages(60)
     msgs.append(("thrust", 20 * PERIOD + PERIOD // 3, -2.0))  # old stamp, matches nothing
     al = StampAligner()
-    _run(al, msgs)
-    assert al.stats.out_of_order == 1 and al.stats.duplicates == 0
+    _run(al, msgs)  # an unusual step: held until the stream goes on (or ends)
+    assert al.stats.out_of_order == 0
+    al.flush()
+    assert al.stats.out_of_order == 1 and al.stats.duplicates == 0 and al.stats.restarts == 0
 
 
 def test_interleaving_across_samples_keeps_stamp_order() -> None:
@@ -137,6 +140,45 @@ def test_any_bounded_interleaving_is_undone(seed: int, spread: int) -> None:
     samples = _run(al, shuffled) + al.flush()
     assert [s.index for s in samples] == list(range(80))
     _check_in_order(samples)
+
+
+def test_a_restarted_clock_is_followed_from_its_new_origin() -> None:
+    """A publisher restarted on a clock from zero (a sim restarted): after HOLD_STEPS usual
+    steps the order is reset; every sample of the new stream comes out, on its own grid."""
+    al = StampAligner()
+    first = _run(al, _messages(100, t0=5000 * PERIOD))
+    second = _run(al, _messages(100, t0=0)) + al.flush()
+    assert len(first) == 100 and len(second) == 100
+    assert [s.index for s in second] == list(range(100))
+    _check_in_order(second)
+    st_ = al.stats
+    assert (st_.restarts, st_.out_of_order, st_.duplicates, st_.unaligned) == (1, 0, 0, 0)
+
+
+@pytest.mark.parametrize("factor", [0.5, 2.0, 5.0])
+def test_a_rate_change_gives_a_new_grid_and_breaks_the_run(factor: float) -> None:
+    al = StampAligner()
+    a = _run(al, [(s, t, v) for s, t, v in _messages(100, t0=100 * PERIOD)])
+    new = round(PERIOD / factor)
+    t0 = 200 * PERIOD
+    later = [(s, t0 + k * new, 10.0 * k + j) for k in range(100)
+             for j, s in enumerate(SIGNALS) for t in [0]]
+    b = _run(al, later) + al.flush()
+    assert len(a) == 100 and len(b) == 100
+    assert al.period_ns == new and al.stats.rate_changes == 1 and al.stats.duplicates == 0
+    # the first new sample still sits on the old grid (one period after the last); from the
+    # second on the indices run on the new grid, not contiguous with the old run
+    assert b[0].index == a[-1].index + 1 and b[1].index != b[0].index + 1
+    assert all(y.index == x.index + 1 for x, y in pairwise(b[1:]))
+    _check_in_order(b[1:], first_index=b[1].index - 1)
+
+
+def test_one_lost_sample_is_still_a_gap_not_a_rate_change() -> None:
+    msgs = [m for m in _messages(100) if m[1] != 50 * PERIOD]
+    al = StampAligner()
+    out = _run(al, msgs) + al.flush()
+    assert len(out) == 99 and al.stats.gaps == 1 and al.stats.samples_missing == 1
+    assert al.stats.rate_changes == 0 and al.period_ns == PERIOD
 
 
 def test_joint_state_layout_pushes_whole_samples() -> None:

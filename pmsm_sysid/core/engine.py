@@ -10,8 +10,9 @@ a fit, and every buffer has a fixed size.
 Counters (:class:`EngineStats`): ``samples_received`` = aligned samples that reached the
 engine, ``samples_dropped`` = those that could not be stored (non-finite values: nothing is
 invented), ``samples_missing`` = stamps missing from the sample grid (lost upstream),
-``unaligned``/``out_of_order``/``duplicates`` = messages, ``windows_fitted``/``skipped``/
-``failed`` = windows.
+``unaligned``/``out_of_order``/``duplicates`` = messages, ``clock_restarts``/``rate_changes``
+= how often the input's clock started again or its rate changed (:class:`StampAligner`),
+``windows_fitted``/``skipped``/``failed`` = windows.
 """
 
 from __future__ import annotations
@@ -69,6 +70,8 @@ class EngineStats:
     unaligned: int
     out_of_order: int
     duplicates: int
+    clock_restarts: int
+    rate_changes: int
     windows_due: int
     windows_fitted: int
     windows_skipped: int
@@ -196,6 +199,7 @@ class OnlineEngine(Generic[R]):
             samples_received=a.samples, samples_dropped=self._dropped,
             samples_missing=a.samples_missing, gaps=a.gaps, messages=a.messages,
             unaligned=a.unaligned, out_of_order=a.out_of_order, duplicates=a.duplicates,
+            clock_restarts=a.restarts, rate_changes=a.rate_changes,
             windows_due=self._queue.put_count, windows_fitted=w.processed - w.failed,
             windows_skipped=self._queue.skipped, windows_failed=w.failed,
             windows_pending=len(self._queue), fit_cpu_s=w.cpu_s,

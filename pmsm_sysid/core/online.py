@@ -53,6 +53,22 @@ class AlignStats:
     duplicates: int
     gaps: int
     samples_missing: int
+    restarts: int = 0
+    rate_changes: int = 0
+
+
+_Msg = tuple[int | None, int, tuple[float, ...]]  # slot (None: a whole sample), stamp, values
+HOLD_STEPS = 4  # further steps of the signal that showed an unusual step, before deciding
+
+
+@dataclass
+class _Hold:
+    """Messages held after an unusual stamp step until it is understood."""
+
+    key: str
+    jump: int
+    steps: list[int] = field(default_factory=list)
+    msgs: list[_Msg] = field(default_factory=list)
 
 
 class _Entry:
@@ -71,6 +87,15 @@ class StampAligner:
     before). ``period_ns`` None = read from the stamps: the median step of the first signal
     that shows ``warmup`` increasing stamps; samples are held until then. An incomplete entry
     is given up (its messages counted unaligned) once ``reorder`` newer entries wait behind it.
+
+    A stamp step of one signal outside (0.5, 1.5) periods holds every message until that
+    signal has taken ``HOLD_STEPS`` more steps, then: usual steps after a jump back by more
+    than ``reorder`` periods = the publisher's clock restarted (e.g. a sim restarted at 0):
+    the order is reset and the stream taken from its new origin (``restarts``); consistent
+    steps of a new size = the rate changed (``rate_changes``, only when the period was read
+    from the stamps): the new period applies and indices start a new run, so no window
+    mixes rates; anything else (a lost sample, a duplicate, one late message) is then taken
+    as usual and counted as such.
     """
 
     def __init__(
@@ -91,6 +116,10 @@ class StampAligner:
         self._slot = {s: i for i, s in enumerate(self.signals)}
         self._tol_fixed = tolerance_ns
         self.period_ns = period_ns
+        self._period_fixed = period_ns is not None
+        self._raw_last: dict[str, int] = {}
+        self._hold: _Hold | None = None
+        self._max_hold = 4 * HOLD_STEPS * len(signals) + 8
         self._reorder = reorder
         self._warmup = warmup
         self._max_pending = 4 * reorder + warmup
@@ -102,7 +131,7 @@ class StampAligner:
         self._last_index: int | None = None
         self._n = dict.fromkeys(
             ("messages", "samples", "unaligned", "out_of_order", "duplicates", "gaps",
-             "samples_missing"), 0)
+             "samples_missing", "restarts", "rate_changes"), 0)
 
     # -- public ------------------------------------------------------------------------
     @property
@@ -126,15 +155,7 @@ class StampAligner:
             raise DataError(f"unknown signal '{signal}' (expected one of {self.signals})")
         self._n["messages"] += 1
         self._learn_period(signal, stamp_ns)
-        if self._is_late(stamp_ns):
-            return []
-        entry = self._find_or_add(stamp_ns)
-        if entry.values[slot] is not None:
-            self._n["duplicates"] += 1
-        else:
-            entry.values[slot] = float(value)
-            entry.count += 1
-        return self._emit()
+        return self._watch(signal, (slot, stamp_ns, (float(value),)))
 
     def push_sample(self, stamp_ns: int, values: Sequence[float]) -> list[Sample]:
         """Add an already aligned sample (e.g. one JointState message holding all signals)."""
@@ -143,15 +164,7 @@ class StampAligner:
         self._n["messages"] += len(values)
         for s in self.signals:
             self._learn_period(s, stamp_ns)
-        if self._is_late(stamp_ns, len(values)):
-            return []
-        entry = self._find_or_add(stamp_ns)
-        if entry.count:
-            self._n["duplicates"] += len(values)
-            return self._emit()
-        entry.values = [float(v) for v in values]
-        entry.count = len(values)
-        return self._emit()
+        return self._watch("", (None, stamp_ns, tuple(float(v) for v in values)))
 
     def count_unaligned(self, n_messages: int) -> None:
         """Count messages that carried no usable sample (e.g. a JointState without the joint)."""
@@ -160,7 +173,7 @@ class StampAligner:
 
     def flush(self) -> list[Sample]:
         """Emit what is complete and give up on the rest (end of stream)."""
-        out: list[Sample] = []
+        out: list[Sample] = self._resolve() if self._hold is not None else []
         if self.period_ns is None and self._pending:
             self.period_ns = self._guess_period()
         while self._pending:
@@ -170,6 +183,73 @@ class StampAligner:
         return out
 
     # -- internals ---------------------------------------------------------------------
+    def _usual(self, step: int) -> bool:
+        p = self.period_ns
+        return p is None or 0.5 * p < step < 1.5 * p
+
+    def _watch(self, key: str, msg: _Msg) -> list[Sample]:
+        """Take ``msg`` now, or hold it while an unusual stamp step is being understood."""
+        stamp = msg[1]
+        last = self._raw_last.get(key)
+        self._raw_last[key] = stamp
+        hold = self._hold
+        if hold is None:
+            if last is None or self._usual(stamp - last):
+                return self._accept(msg)
+            self._hold = _Hold(key, stamp - last, msgs=[msg])
+            return []
+        hold.msgs.append(msg)
+        if key == hold.key and last is not None:
+            hold.steps.append(stamp - last)
+        if len(hold.steps) >= HOLD_STEPS or len(hold.msgs) >= self._max_hold:
+            return self._resolve()
+        return []
+
+    def _resolve(self) -> list[Sample]:
+        """Decide what the held unusual step was (class docstring), then take the messages."""
+        hold, self._hold = self._hold, None
+        assert hold is not None and self.period_ns is not None
+        p, steps = self.period_ns, hold.steps
+        if steps and all(self._usual(d) for d in steps):
+            if hold.jump < -self._reorder * p:
+                self._restart()
+        elif len(steps) >= HOLD_STEPS and not self._period_fixed:
+            new = int(np.median([hold.jump, *steps]))
+            if new > 0 and max(steps) - min(steps) <= 0.2 * new:
+                self.period_ns = new
+                self._last_index = None  # a new run of indices on the new grid
+                self._n["rate_changes"] += 1
+        out: list[Sample] = []
+        for m in hold.msgs:
+            out.extend(self._accept(m))
+        return out
+
+    def _restart(self) -> None:
+        """The publisher's clock started again: forget the order of the old stream."""
+        for e in self._pending:
+            self._n["unaligned"] += e.count
+        self._pending, self._keys = [], []
+        self._last_stamp = self._last_index = None
+        self._n["restarts"] += 1
+
+    def _accept(self, msg: _Msg) -> list[Sample]:
+        """Join one message (or a whole sample) into the pending table; emit what is done."""
+        slot, stamp, values = msg
+        if self._is_late(stamp, len(values)):
+            return []
+        entry = self._find_or_add(stamp)
+        if slot is None:
+            if entry.count:
+                self._n["duplicates"] += len(values)
+            else:
+                entry.values, entry.count = list(values), len(values)
+        elif entry.values[slot] is not None:
+            self._n["duplicates"] += 1
+        else:
+            entry.values[slot] = values[0]
+            entry.count += 1
+        return self._emit()
+
     def _learn_period(self, signal: str, stamp: int) -> None:
         if self.period_ns is not None:
             return
