@@ -217,9 +217,6 @@ def test_engine_resumes_after_its_publisher_pauses() -> None:
         engine.stop()
 
 
-@pytest.mark.xfail(strict=True, reason="StampAligner drops every message stamped before the "
-                   "newest stamp it has seen: a publisher restarted on a clock from zero "
-                   "(sim time) is ignored for good, counted as out of order")
 def test_engine_resumes_after_its_publisher_restarts_its_clock() -> None:
     import numpy as np
 
@@ -236,9 +233,6 @@ def test_engine_resumes_after_its_publisher_restarts_its_clock() -> None:
         engine.stop()
 
 
-@pytest.mark.xfail(strict=True, reason="the aligner learns the sample period once: at half "
-                   "the rate every sample is a gap (no window ever again), at twice the rate "
-                   "every other message is dropped as a duplicate (windows of decimated data)")
 @pytest.mark.parametrize("factor", [0.5, 2.0], ids=["half_rate", "double_rate"])
 def test_engine_follows_a_rate_change(factor: float) -> None:
     import numpy as np
