@@ -59,3 +59,32 @@ def parse_range(text: str) -> tuple[int, int]:
     if start < 0 or stop <= start:
         raise argparse.ArgumentTypeError(f"need 0 <= START < STOP, got '{text}'")
     return start, stop
+
+
+def parse_fraction(text: str) -> float:
+    """A number strictly between 0 and 1 (for argparse)."""
+    import argparse
+
+    try:
+        value = float(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from exc
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got '{text}'")
+    return value
+
+
+def replace_bag_dir(out: Path, force: bool) -> None:
+    """Make room for a new bag at ``out``: refuse unless ``force``, and never delete a
+    directory that is not a rosbag2 bag."""
+    from ..core.errors import BagError
+
+    if not out.exists():
+        return
+    if not force:
+        raise BagError(f"{out} exists already; use --force to replace it")
+    if not out.is_dir() or not (out / "metadata.yaml").is_file():
+        raise BagError(f"{out} exists and is not a rosbag2 directory; not replacing it")
+    import shutil
+
+    shutil.rmtree(out)

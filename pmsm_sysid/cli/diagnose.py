@@ -15,19 +15,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import write_json
+from .common import parse_fraction, write_json
 
 HELP = "sim-to-real: locate the mismatch, name the missing physics, model it, show the fit"
 
 
-def _fraction(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from exc
-    if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got '{text}'")
-    return value
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -38,9 +30,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="held-out recording (default: the last 30%% of --real)")
     p.add_argument("--namespace", default=None,
                    help="topic namespace or JointState topic (default: auto-detect)")
-    p.add_argument("--alpha", type=_fraction, default=1e-3,
+    p.add_argument("--alpha", type=parse_fraction, default=1e-3,
                    help="family-wise false-alarm level of each selection step (default 1e-3)")
-    p.add_argument("--min-share", type=_fraction, default=0.01,
+    p.add_argument("--min-share", type=parse_fraction, default=0.01,
                    help="smallest share of the mismatch an effect must explain (default 0.01)")
     p.add_argument("--no-replay", action="store_true",
                    help="skip the short-horizon speed replay (output error)")

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .common import parse_range, write_json
+from .common import parse_fraction, parse_range, write_json
 
 HELP = "offline NARX identification by OFR on one recording"
 
@@ -29,14 +29,6 @@ def _count(text: str) -> int:
     return value
 
 
-def _rho(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from exc
-    if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"rho must be in (0, 1), got '{text}'")
-    return value
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -59,7 +51,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-validate", action="store_true", help="skip the validation window")
     p.add_argument("--criterion", choices=("terms", "err", "aic", "bic"), default="terms",
                    help="model size: fixed --terms, 1-sum(ERR) < rho, or AIC/BIC (default terms)")
-    p.add_argument("--rho", type=_rho, default=1e-3, help="ERR tolerance for --criterion err")
+    p.add_argument("--rho", type=parse_fraction, default=1e-3,
+                   help="ERR tolerance for --criterion err")
     p.add_argument("--method", choices=("iofr", "ofr"), default="iofr",
                    help="iofr: FROLS refined by exact term exchange (default); ofr: classic FROLS")
     p.add_argument("--no-constant", action="store_true",

@@ -28,18 +28,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write a summary as JSON ('-' = stdout)")
 
 
-def _prepare_out(out: Path, force: bool) -> None:
-    from ..core.errors import BagError
-
-    if not out.exists():
-        return
-    if not force:
-        raise BagError(f"{out} exists already; use --force to replace it")
-    if not out.is_dir() or not (out / "metadata.yaml").is_file():
-        raise BagError(f"{out} exists and is not a rosbag2 directory; not replacing it")
-    import shutil
-
-    shutil.rmtree(out)
 
 
 def _drain(session: Any, node: Any, quiet_s: float = 0.3, max_s: float = 3.0) -> None:
@@ -66,14 +54,14 @@ def run(args: argparse.Namespace) -> int:
     from ..core.errors import SysIdError
     from ..nodes.recorder import RecorderNode
     from ..rosutil import ros_session, stop_on_signals
-    from .common import write_json
+    from .common import replace_bag_dir, write_json
 
     if args.duration is not None and not args.duration > 0:
         raise SysIdError(f"--duration must be > 0, got {args.duration}")
     if args.depth < 1:
         raise SysIdError(f"--depth must be >= 1, got {args.depth}")
     out = Path(args.out)
-    _prepare_out(out, args.force)
+    replace_bag_dir(out, args.force)
     info = sys.stderr if args.json == "-" else sys.stdout
     with ros_session() as session, stop_on_signals(session.stop), \
             BagRecorder(out, storage=args.storage) as recorder:

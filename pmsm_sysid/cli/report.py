@@ -12,8 +12,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import parse_range, write_json
-from .identify import _count, _rho
+from .common import parse_fraction, parse_range, write_json
+from .identify import _count
 
 HELP = "figures and tables of a recording or a result JSON as an HTML page with PNGs"
 
@@ -39,7 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-validate", action="store_true", help="no validation window")
     g.add_argument("--criterion", choices=("terms", "err", "aic", "bic"), default="terms",
                    help="model size rule (default terms)")
-    g.add_argument("--rho", type=_rho, default=1e-3, help="ERR tolerance for --criterion err")
+    g.add_argument("--rho", type=parse_fraction, default=1e-3,
+                   help="ERR tolerance for --criterion err")
     g.add_argument("--method", choices=("iofr", "ofr"), default="iofr",
                    help="term selection (default iofr)")
     g.add_argument("--corr-lags", type=_count, default=20,

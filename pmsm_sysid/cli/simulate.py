@@ -58,18 +58,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", metavar="FILE", help="write a summary as JSON ('-' = stdout)")
 
 
-def _clear_out(out: Path, force: bool) -> None:
-    from ..core.errors import BagError
-
-    if not out.exists():
-        return
-    if not force:
-        raise BagError(f"{out} exists already; use --force to replace it")
-    if not out.is_dir() or not (out / "metadata.yaml").is_file():
-        raise BagError(f"{out} exists and is not a rosbag2 directory; not replacing it")
-    import shutil
-
-    shutil.rmtree(out)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -81,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     from ..core.excitation import ExcitationSource
     from ..core.physics import effective_substeps, simulate
     from ..core.plant import load_plant, nominal_plant, plant_to_dict
-    from .common import write_json
+    from .common import replace_bag_dir, write_json
 
     plant = load_plant(args.plant) if args.plant else nominal_plant()
     fs = plant.sample_rate_hz
@@ -89,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     source = ExcitationSource(args.excitation, fs, seed=args.seed, amplitude_n=args.amplitude,
                               **dict(args.excitation_option))
     out = Path(args.out)
-    _clear_out(out, args.force)
+    replace_bag_dir(out, args.force)
     started = time.perf_counter()
     rec = simulate(plant, source.block(0, n), seed=args.seed)
     sim_s = time.perf_counter() - started
