@@ -343,7 +343,7 @@ def test_empty_bags_and_bags_without_definitions(tmp_path: Path, storage: str,
     ([*SMALL, "--validate", "4900:5001"], ["validation range 4900:5001 is outside"]),
     (["--estimate", "10:5"], ["need 0 <= START < STOP, got '10:5'"]),
     (["--estimate", "1e3:2e3"], ["expected START:STOP"]),
-    (["--rho", "2"], ["rho must be in (0, 1)"]),
+    (["--rho", "2"], ["argument --rho: expected a number in (0, 1), got '2'"]),
     (["--frobnicate", "1"], ["unrecognized arguments: --frobnicate 1"]),
 ], ids=lambda v: "_".join(v) if isinstance(v, list) and v and v[0].startswith("-") else "")
 def test_impossible_identify_options(clean: dict[str, object], argv: list[str],
