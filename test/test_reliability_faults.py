@@ -327,7 +327,8 @@ def test_identifier_node_survives_failing_fits_a_silent_and_a_restarted_publishe
     ns = f"/t{uuid.uuid4().hex[:10]}"
     params = [Parameter(k, value=v) for k, v in {
         "outputs": ["speed"], "window": 400, "hop": 200, "speed.ny": 2, "speed.nu": 2,
-        "speed.terms": 5, "method": "iofr", "publish_period_s": 0.02}.items()]
+        "speed.terms": 5, "method": "iofr", "publish_period_s": 0.02,
+        "stale_after_s": 0.3}.items()]
     ident = IdentifierNode(context=ros_context, namespace=ns, parameter_overrides=params)
     mon = MonitorNode(context=ros_context, namespace=ns)
     ex = SingleThreadedExecutor(context=ros_context)
@@ -358,6 +359,15 @@ def test_identifier_node_survives_failing_fits_a_silent_and_a_restarted_publishe
         ages = [t["age_s"] for t in mon.snapshot()["topics"] if t["topic"].startswith(ns)
                 and t["count"]]
         assert len(ages) == 3 and min(ages) >= 0.5
+        # ... and the identifier reports its stale input itself (once), on the validation topic
+        s = ident.summary()
+        assert s["input_stale"] is True and s["stale_events"] == 1
+        assert s["last_input_age_s"] >= 0.5
+        deadline_stale = time.monotonic() + 10
+        while not any(v.get("name") == "identifier/input" and "stale input" in v.get("message", "")
+                      for v in mon.snapshot()["sysid"]["validation"] or []):
+            assert time.monotonic() < deadline_stale, "no stale-input status seen by the monitor"
+            ex.spin_once(timeout_sec=0.05)
         # a new publisher takes over 10 s later on the same clock
         second = _Publisher(ros_context, ns)
         ex.add_node(second.node)
@@ -366,6 +376,7 @@ def test_identifier_node_survives_failing_fits_a_silent_and_a_restarted_publishe
             ex.spin_once(timeout_sec=0.05)
         _stream(ex, ident, mon, ns, second, 500 + 1200 + 5000, rows[1200:])
         s = ident.summary()
+        assert s["input_stale"] is False and s["stale_events"] == 1  # input resumed
         assert (s["gaps"], s["samples_missing"], s["samples_received"]) == (1, 5000, 2400)
         assert s["windows_due"] == 8 and ident.models_published == 6
         last = s["models"]["speed"]

@@ -18,6 +18,7 @@ publishers and one timer that publishes finished results:
 from __future__ import annotations
 
 import json
+import time
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -55,7 +56,7 @@ DEFAULTS: dict[str, Any] = {
     "position.ny": 10, "position.nu": 10, "position.degree": 2, "position.delay": 1,
     "position.terms": 15, "min_r2": 0.9, "change.s_confirm": 7.0,
     "change.baseline": 24, "change.warmup": 8, "change.min_r2": 0.99,
-    "publish_period_s": 0.05,
+    "publish_period_s": 0.05, "stale_after_s": 1.0,
 }
 
 
@@ -88,6 +89,9 @@ class IdentifierNode(Node):
         self.last: dict[str, Any] = {"models": {}, "validation": {}, "changes": []}
         self.models_published = 0
         self.errors: list[str] = []
+        self._last_input: float | None = None  # time.monotonic() of the newest input message
+        self.stale = False
+        self.stale_events = 0
         self._model_pub = self.create_publisher(String, MODEL_TOPIC, 50)
         self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION_TOPIC, 50)
         self._change_pub = self.create_publisher(DiagnosticArray, CHANGE_TOPIC, 50)
@@ -119,6 +123,7 @@ class IdentifierNode(Node):
 
     def _take(self, sig: str, data: bytes) -> None:
         """One serialized input message: stamp and value straight from its CDR bytes."""
+        self._input_seen()
         got = decode_stamped(data)
         if got is None:  # not little-endian CDR: the generic deserializer
             msg = deserialize_message(data, self._types[sig])
@@ -141,6 +146,7 @@ class IdentifierNode(Node):
                 return
 
     def _on_joint_state(self, msg: Any) -> None:
+        self._input_seen()
         try:
             i = list(msg.name).index(self.params["joint_name"])
             values = (msg.effort[i], msg.velocity[i], msg.position[i])
@@ -150,8 +156,35 @@ class IdentifierNode(Node):
         self.engine.push_sample(stamp_to_ns(msg.header.stamp), values)
 
     # ------------------------------------------------------------------ publishing
+    def _input_seen(self) -> None:
+        self._last_input = time.monotonic()
+        if self.stale:
+            self._report_stale(False, 0.0)
+
+    def input_age_s(self) -> float | None:
+        """Seconds since the newest input message (None before the first one)."""
+        return None if self._last_input is None else time.monotonic() - self._last_input
+
+    def _check_stale(self) -> None:
+        age = self.input_age_s()
+        if age is not None and not self.stale and age > float(self.params["stale_after_s"]):
+            self._report_stale(True, age)
+
+    def _report_stale(self, stale: bool, age: float) -> None:
+        """Input went silent (WARN, once) or came back (OK) on the validation topic."""
+        self.stale = stale
+        self.stale_events += int(stale)
+        text = f"stale input: no sample for {age:.1f} s" if stale else "input resumed"
+        if stale:
+            self.get_logger().warning(text)  # type: ignore[no-untyped-call]
+        arr = DiagnosticArray(status=[status("identifier/input", WARN if stale else OK, text,
+                                             self.get_name(), {"input_age_s": age})])
+        arr.header.stamp = self.get_clock().now().to_msg()
+        self._val_pub.publish(arr)
+
     def publish_results(self) -> None:
         """Publish what the fitting thread finished (timer callback; also call at shutdown)."""
+        self._check_stale()
         for r in self.engine.drain():
             if isinstance(r, WindowError):
                 self._note_error(f"window {r.seq}: {r.error}")
@@ -217,7 +250,9 @@ class IdentifierNode(Node):
     # ------------------------------------------------------------------ summary
     def summary(self) -> dict[str, Any]:
         """Counters and the latest results (the ``run --json`` summary's identifier part)."""
-        return {**self.engine.stats.to_dict(), "models": dict(self.last["models"]),
+        return {**self.engine.stats.to_dict(), "input_stale": self.stale,
+                "stale_events": self.stale_events, "last_input_age_s": self.input_age_s(),
+                "models": dict(self.last["models"]),
                 "validation": dict(self.last["validation"]),
                 "change_events": list(self.last["changes"]), "errors": list(self.errors)}
 
