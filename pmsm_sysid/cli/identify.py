@@ -31,8 +31,9 @@ def _count(text: str) -> int:
 
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("bag", metavar="BAG", help="rosbag2 recording (directory)")
+def add_model_options(p: Any) -> None:
+    """The model and protocol options shared by ``identify`` and ``report`` (a parser or an
+    argument group)."""
     p.add_argument("--input", default="thrust", choices=("thrust",), help="input signal")
     p.add_argument("--output", default="speed", choices=("speed", "position"),
                    help="output signal (default speed)")
@@ -62,6 +63,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "ordinary candidate")
     p.add_argument("--corr-lags", type=_count, default=20,
                    help="lags of the correlation tests (default 20)")
+
+
+def fit_config(args: argparse.Namespace) -> Any:
+    """The FitConfig the options of :func:`add_model_options` ask for."""
+    from ..core.errors import DataError
+    from ..core.identify import FitConfig
+    from ..core.model import Structure
+
+    if args.terms < 1:
+        raise DataError("--terms must be at least 1")
+    structure = Structure(ny=args.ny, nu=args.nu, degree=args.degree, delay=args.delay,
+                          constant=not args.no_constant)
+    return FitConfig(structure=structure, n_terms=args.terms, criterion=args.criterion,
+                     rho=args.rho, method=args.method, remove_dc=not args.keep_dc)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("bag", metavar="BAG", help="rosbag2 recording (directory)")
+    add_model_options(p)
     p.add_argument("--json", metavar="FILE", help="write the result as JSON ('-' = stdout)")
 
 
@@ -110,16 +130,9 @@ def _alignment_note(report: Any, out: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..bagio import read_recording
-    from ..core.errors import DataError
-    from ..core.identify import FitConfig, identify_recording
-    from ..core.model import Structure
+    from ..core.identify import identify_recording
 
-    if args.terms < 1:
-        raise DataError("--terms must be at least 1")
-    structure = Structure(ny=args.ny, nu=args.nu, degree=args.degree, delay=args.delay,
-                          constant=not args.no_constant)
-    config = FitConfig(structure=structure, n_terms=args.terms, criterion=args.criterion,
-                       rho=args.rho, method=args.method, remove_dc=not args.keep_dc)
+    config = fit_config(args)
     loaded = read_recording(args.bag)
     rec = loaded.recording
     result = identify_recording(
