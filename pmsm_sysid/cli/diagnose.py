@@ -47,6 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..bagio import read_recording
+    from ..core.datacheck import check_sampling
     from ..core.discrepancy import DiagnoseOptions, diagnose
     from ..core.plant import dump_plant, load_plant
 
@@ -54,6 +55,10 @@ def run(args: argparse.Namespace) -> int:
     real = read_recording(args.real, namespace=args.namespace).recording
     validate = (read_recording(args.validate, namespace=args.namespace).recording
                 if args.validate else None)
+    # derivatives, filters and replays assume one sampling grid: refuse gaps and rate changes
+    for path, rec in ((args.real, real), (args.validate, validate)):
+        if rec is not None:
+            check_sampling(rec.t, rec.sample_rate_hz, f"recording {path}")
     options = DiagnoseOptions(alpha=args.alpha, min_share=args.min_share,
                               replay=not args.no_replay, gfrf=not args.no_gfrf)
     result = diagnose(plant, real, validate, options)
