@@ -140,7 +140,26 @@ class ProductGram:
         return out
 
 
-class ExplicitRegressors:
+class DenseProjector:
+    """A projector over an explicit matrix (e.g. a handful of selected columns)."""
+
+    def __init__(self, matrix: FloatArray) -> None:
+        self.matrix = np.asfortranarray(matrix, dtype=np.float64)
+        self.n_rows, self.n_candidates = self.matrix.shape
+
+    def norms2(self) -> FloatArray:
+        out: FloatArray = np.einsum("ij,ij->j", self.matrix, self.matrix)
+        return out
+
+    def project(self, w: FloatArray) -> FloatArray:
+        out: FloatArray = self.matrix.T @ w
+        return out
+
+    def columns(self, idx: IntArray) -> FloatArray:
+        return np.asfortranarray(self.matrix[:, np.asarray(idx, dtype=np.intp)])
+
+
+class ExplicitRegressors(DenseProjector):
     """The candidate matrix P, filled once into a Fortran-order buffer (any degree)."""
 
     def __init__(self, base: FloatArray, cset: CandidateSet) -> None:
@@ -150,20 +169,7 @@ class ExplicitRegressors:
                 f"candidate matrix {rows} x {m} needs {rows * m * 8 / 2**20:.0f} MB "
                 f"(limit {MAX_MATRIX_BYTES / 2**20:.0f} MB); reduce lags, degree or window"
             )
-        self.n_rows, self.n_candidates = rows, m
-        self.matrix = candidate_matrix(base, cset)
-
-    def norms2(self) -> FloatArray:
-        p = self.matrix
-        out: FloatArray = np.einsum("ij,ij->j", p, p)
-        return out
-
-    def project(self, w: FloatArray) -> FloatArray:
-        out: FloatArray = self.matrix.T @ w
-        return out
-
-    def columns(self, idx: IntArray) -> FloatArray:
-        return np.asfortranarray(self.matrix[:, np.asarray(idx, dtype=np.intp)])
+        super().__init__(candidate_matrix(base, cset))
 
 
 def candidate_matrix(
@@ -215,22 +221,3 @@ def term_matrix(base: FloatArray, cset: CandidateSet, idx: IntArray) -> FloatArr
             if i:
                 out[:, c] *= base[:, i]
     return out
-
-
-class DenseProjector:
-    """A projector over an explicit matrix (e.g. a handful of selected columns)."""
-
-    def __init__(self, matrix: FloatArray) -> None:
-        self.matrix = np.asfortranarray(matrix, dtype=np.float64)
-        self.n_rows, self.n_candidates = self.matrix.shape
-
-    def norms2(self) -> FloatArray:
-        out: FloatArray = np.einsum("ij,ij->j", self.matrix, self.matrix)
-        return out
-
-    def project(self, w: FloatArray) -> FloatArray:
-        out: FloatArray = self.matrix.T @ w
-        return out
-
-    def columns(self, idx: IntArray) -> FloatArray:
-        return np.asfortranarray(self.matrix[:, np.asarray(idx, dtype=np.intp)])
