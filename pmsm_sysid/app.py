@@ -28,7 +28,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from .core.errors import SysIdError
+from .core.errors import PmsmSysidError
 from .core.plant import Plant
 from .topics import DEFAULT_NAMESPACE
 
@@ -38,12 +38,12 @@ SETTLE_S = 5.0  # after the sim's last sample, how long the identifier may still
 
 
 def parse_nodes(text: str | Sequence[str]) -> tuple[str, ...]:
-    """``"sim,identifier"`` -> ("sim", "identifier"); SysIdError on unknown or empty."""
+    """``"sim,identifier"`` -> ("sim", "identifier"); PmsmSysidError on unknown or empty."""
     items = [s.strip() for s in (text.split(",") if isinstance(text, str) else text)]
     items = [s for s in items if s]
     bad = [s for s in items if s not in NODES]
     if bad or not items:
-        raise SysIdError(f"--nodes takes a comma list of {', '.join(NODES)} (got "
+        raise PmsmSysidError(f"--nodes takes a comma list of {', '.join(NODES)} (got "
                          f"'{','.join(items) if not bad else ','.join(bad)}')")
     return tuple(dict.fromkeys(items))
 
@@ -183,18 +183,18 @@ def _make_node(name: str, ctx: Context, opts: dict[str, Any]) -> Node:
 
 
 def _make_checked(name: str, ctx: Context, opts: dict[str, Any]) -> Node:
-    """``_make_node`` with parameter problems turned into one clear SysIdError."""
+    """``_make_node`` with parameter problems turned into one clear PmsmSysidError."""
     from rclpy.exceptions import ParameterException
 
     try:
         node = _make_node(name, ctx, opts)
     except ParameterException as exc:
-        raise SysIdError(f"{name} node: {exc}") from exc
+        raise PmsmSysidError(f"{name} node: {exc}") from exc
     given = opts.get(f"{name}_params") or {}
     unknown = sorted(k for k in given if not node.has_parameter(k))
     if unknown:
         node.destroy_node()  # type: ignore[no-untyped-call]
-        raise SysIdError(f"{name} node has no parameter(s) {', '.join(unknown)}")
+        raise PmsmSysidError(f"{name} node has no parameter(s) {', '.join(unknown)}")
     return node
 
 
@@ -217,7 +217,7 @@ def build_pipeline(
     # the identifier last: its input subscriptions appear just before the executor spins
     names = tuple(sorted(parse_nodes(nodes), key=lambda n: n == "identifier"))
     if clock not in ("wall", "sim"):
-        raise SysIdError(f"clock must be 'wall' or 'sim', got '{clock}'")
+        raise PmsmSysidError(f"clock must be 'wall' or 'sim', got '{clock}'")
     opts = {"plant": plant, "excitation": excitation, "seed": seed, "namespace": namespace,
             "clock": clock, "rate": rate if clock == "sim" else 1.0,
             "identifier_params": identifier_params, "sim_params": sim_params,

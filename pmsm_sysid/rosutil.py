@@ -30,7 +30,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.utilities import try_shutdown
 
-from .core.errors import BagError, SysIdError
+from .core.errors import BagError, PmsmSysidError
 from .topics import INPUT_TYPES, POSITION, SPEED, THRUST
 
 NS_PER_S = 1_000_000_000
@@ -61,9 +61,9 @@ def env_domain_id() -> int | None:
     try:
         value = int(text)
     except ValueError as exc:
-        raise SysIdError(f"ROS_DOMAIN_ID must be an integer, got '{text}'") from exc
+        raise PmsmSysidError(f"ROS_DOMAIN_ID must be an integer, got '{text}'") from exc
     if not 0 <= value <= 232:
-        raise SysIdError(f"ROS_DOMAIN_ID must be in 0..232, got {value}")
+        raise PmsmSysidError(f"ROS_DOMAIN_ID must be in 0..232, got {value}")
     return value
 
 
@@ -111,7 +111,7 @@ def ros_session(domain_id: int | None = None) -> Iterator[RosSession]:
     try:
         rclpy.init(context=ctx, domain_id=domain)
     except Exception as exc:  # rclpy raises RCLError subclasses of RuntimeError
-        raise SysIdError(f"cannot initialise ROS 2 (domain {domain}): {exc}") from exc
+        raise PmsmSysidError(f"cannot initialise ROS 2 (domain {domain}): {exc}") from exc
     executor = SingleThreadedExecutor(context=ctx)
     session = RosSession(ctx, executor)
     try:
@@ -203,4 +203,4 @@ def sample_value(signal_name: str, msg: Any) -> float:
         return float(msg.twist.linear.x)
     if signal_name == POSITION:
         return float(msg.point.x)
-    raise SysIdError(f"unknown signal '{signal_name}' (expected thrust, speed or position)")
+    raise PmsmSysidError(f"unknown signal '{signal_name}' (expected thrust, speed or position)")

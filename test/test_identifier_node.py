@@ -185,9 +185,9 @@ def test_bad_parameters_raise_one_clear_error(ros_context: Any, params: dict[str
                                               match: str) -> None:
     from rclpy.parameter import Parameter
 
-    from pmsm_sysid.core.errors import SysIdError
+    from pmsm_sysid.core.errors import PmsmSysidError
     from pmsm_sysid.nodes.identifier_node import IdentifierNode
 
-    with pytest.raises(SysIdError, match=match):
+    with pytest.raises(PmsmSysidError, match=match):
         IdentifierNode(context=ros_context,
                        parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])

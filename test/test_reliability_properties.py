@@ -1,6 +1,6 @@
 """Property tests (issue 8): on random finite inputs the bag reader, OFR/iOFR and the GFRFs
 never crash, never put NaN in their outputs, and fail only with the project's documented
-error types (:class:`~pmsm_sysid.core.errors.SysIdError` subclasses).
+error types (:class:`~pmsm_sysid.core.errors.PmsmSysidError` subclasses).
 
 The aligner itself has its own property tests (``test/test_align.py``: counts, mutual
 nearest matching against brute force, jittered grids with drops, duplicates and shuffles);
@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 from reliability_helpers import write_messages
 
 from pmsm_sysid.bagio import read_recording
-from pmsm_sysid.core.errors import BagError, DataError, SysIdError
+from pmsm_sysid.core.errors import BagError, DataError, PmsmSysidError
 from pmsm_sysid.core.gfrf import Gfrf
 from pmsm_sysid.core.gfrf_analysis import analyse
 from pmsm_sysid.core.identify import FitConfig, fit_narx, validate_narx
@@ -158,7 +158,7 @@ def test_ofr_on_random_finite_data(problem: tuple[np.ndarray, np.ndarray, FitCon
         warnings.simplefilter("error", RuntimeWarning)  # an overflow would be a silent NaN
         try:
             fit = fit_narx(y, u, config, sample_rate_hz=500.0)
-        except SysIdError as exc:
+        except PmsmSysidError as exc:
             assert "\n" not in str(exc)
             event(f"refused: {type(exc).__name__}")
             return
@@ -172,7 +172,7 @@ def test_ofr_on_random_finite_data(problem: tuple[np.ndarray, np.ndarray, FitCon
         warnings.simplefilter("error", RuntimeWarning)
         try:
             report = validate_narx(m, y, u, max_lag=2)
-        except SysIdError:
+        except PmsmSysidError:
             return
     d = report.to_dict()
     for test in d["correlation_tests"].values():
@@ -218,7 +218,7 @@ def test_gfrf_frequencies_out_of_range_are_gfrf_errors(f: list[float]) -> None:
     g = Gfrf.from_model(NarxModel.from_terms({"y(k-1)": 0.5, "u(k-1)": 1.0, "u(k-1)^2": 0.2}))
     try:
         h = g.h(*f)
-    except SysIdError as exc:
+    except PmsmSysidError as exc:
         assert "\n" not in str(exc)
         return
     assert 1 <= len(f) <= 4 and all(abs(x) <= 0.5 for x in f)

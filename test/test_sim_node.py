@@ -213,12 +213,12 @@ def test_cogging_switched_on_at_run_time(ros_context: Any) -> None:
 
 
 def test_bad_initial_parameters_raise_one_clear_error(ros_context: Any) -> None:
-    from pmsm_sysid.core.errors import ExcitationError, SysIdError
+    from pmsm_sysid.core.errors import ExcitationError, PmsmSysidError
     from pmsm_sysid.nodes.sim_node import MotorSimNode
 
     with pytest.raises(ExcitationError, match="unknown excitation 'sine'"):
         MotorSimNode(context=ros_context, excitation="sine")
-    with pytest.raises(SysIdError, match="rate applies to clock=sim only"):
+    with pytest.raises(PmsmSysidError, match="rate applies to clock=sim only"):
         MotorSimNode(context=ros_context, clock="wall", rate=2.0)
 
 

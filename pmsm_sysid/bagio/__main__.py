@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..core.errors import SysIdError
+from ..core.errors import PmsmSysidError
 from .recorder import repair
 
 
@@ -19,7 +19,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         n = repair(args.bag)
-    except SysIdError as exc:
+    except PmsmSysidError as exc:
         print(f"repair: error: {exc}", file=sys.stderr)
         return 2
     print(f"{args.bag}: repaired, {n} messages")

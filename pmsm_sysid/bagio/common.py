@@ -18,7 +18,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from ..core.align import AlignReport
-from ..core.errors import BagError, SysIdError
+from ..core.errors import BagError, PmsmSysidError
 from ..core.signals import Recording
 
 FRAME_ID = "pmsm"
@@ -127,7 +127,7 @@ def open_reader(path: str | Path) -> Iterator[Any]:
         raise BagError(f"{path}: {_explain(path, exc)}") from exc
     try:
         yield reader
-    except SysIdError:
+    except PmsmSysidError:
         raise
     except Exception as exc:
         raise BagError(f"{path}: storage is corrupt or truncated ({_reason(exc)})") from exc

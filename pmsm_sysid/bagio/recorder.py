@@ -40,7 +40,7 @@ from rosbags.interfaces import Connection
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.metadata import dump_qos_v9
 
-from ..core.errors import BagError, SysIdError
+from ..core.errors import BagError, PmsmSysidError
 from .common import DEFAULT_QOS, connection_args, storage_plugin
 
 TopicRow = tuple[str, str, str, Any, str, int]  # name, type, format, qos list, hash, count
@@ -178,7 +178,7 @@ class BagRecorder:
                 storage.bio.flush()
             write_metadata(self.path, self._metadata())
             self.messages_flushed = self.messages_written
-        except SysIdError:
+        except PmsmSysidError:
             raise
         except Exception as exc:
             raise BagError(f"{self.path}: cannot flush bag ({exc})") from exc

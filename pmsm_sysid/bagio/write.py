@@ -10,7 +10,7 @@ import numpy as np
 from rosbags.rosbag2 import Writer
 
 from .. import topics as tp
-from ..core.errors import BagError, SysIdError
+from ..core.errors import BagError, PmsmSysidError
 from ..core.signals import FloatArray, Recording
 from .cdr import encode_stamped
 from .common import (
@@ -88,7 +88,7 @@ def write_recording(
             for k, stamp in enumerate(ns.tolist()):
                 for conn, msgtype, values in columns:
                     writer.write(conn, stamp, encode_stamped(msgtype, stamp, FRAME_ID, values[k]))
-    except SysIdError:
+    except PmsmSysidError:
         raise
     except Exception as exc:
         raise BagError(f"{path}: cannot write bag ({type(exc).__name__}: {exc})") from exc

@@ -3,7 +3,7 @@
 Each verb lives in its own module ``pmsm_sysid.cli.<verb>`` exposing ``HELP`` (one line),
 ``add_arguments(parser)`` and ``run(args) -> int``. Verb modules import only the standard
 library at top level; heavy imports (numpy, rclpy, rosbags) happen inside ``run`` so that
-``--help`` is instant. Any :class:`~pmsm_sysid.core.errors.SysIdError` becomes one line on
+``--help`` is instant. Any :class:`~pmsm_sysid.core.errors.PmsmSysidError` becomes one line on
 stderr and exit code 2; usage errors also exit 2 with one line.
 """
 
@@ -57,13 +57,13 @@ BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"
 def main(argv: Sequence[str] | None = None) -> int:
     for var in BLAS_THREAD_VARS:  # before any verb imports numpy
         os.environ.setdefault(var, "1")
-    from ..core.errors import SysIdError
+    from ..core.errors import PmsmSysidError
 
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return int(args._run(args))
-    except SysIdError as exc:
+    except PmsmSysidError as exc:
         print(f"pmsm-sysid {args.verb}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -48,12 +48,12 @@ def render_line(snap: dict[str, Any], elapsed_s: float) -> str:
 
 
 def _check(args: argparse.Namespace) -> float | None:
-    from ..core.errors import SysIdError
+    from ..core.errors import PmsmSysidError
 
     if args.interval <= 0:
-        raise SysIdError(f"--interval must be > 0, got {args.interval}")
+        raise PmsmSysidError(f"--interval must be > 0, got {args.interval}")
     if args.duration is not None and args.duration <= 0:
-        raise SysIdError(f"--duration must be > 0, got {args.duration}")
+        raise PmsmSysidError(f"--duration must be > 0, got {args.duration}")
     duration: float | None = args.duration
     if args.once and duration is None:
         duration = 3.0

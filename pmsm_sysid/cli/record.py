@@ -51,15 +51,15 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from ..bagio import BagRecorder
-    from ..core.errors import SysIdError
+    from ..core.errors import PmsmSysidError
     from ..nodes.recorder import RecorderNode
     from ..rosutil import ros_session, stop_on_signals
     from .common import replace_bag_dir, write_json
 
     if args.duration is not None and not args.duration > 0:
-        raise SysIdError(f"--duration must be > 0, got {args.duration}")
+        raise PmsmSysidError(f"--duration must be > 0, got {args.duration}")
     if args.depth < 1:
-        raise SysIdError(f"--depth must be >= 1, got {args.depth}")
+        raise PmsmSysidError(f"--depth must be >= 1, got {args.depth}")
     out = Path(args.out)
     replace_bag_dir(out, args.force)
     info = sys.stderr if args.json == "-" else sys.stdout

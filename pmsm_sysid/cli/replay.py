@@ -32,17 +32,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _check(args: argparse.Namespace) -> float:
-    from ..core.errors import SysIdError
+    from ..core.errors import PmsmSysidError
 
     rate = 0.0 if args.fast else args.rate
     if not rate >= 0 or rate == float("inf"):
-        raise SysIdError(f"--rate must be >= 0, got {args.rate}")
+        raise PmsmSysidError(f"--rate must be >= 0, got {args.rate}")
     if args.loop < 0:
-        raise SysIdError(f"--loop must be >= 0, got {args.loop}")
+        raise PmsmSysidError(f"--loop must be >= 0, got {args.loop}")
     if args.wait < 0:
-        raise SysIdError(f"--wait must be >= 0, got {args.wait}")
+        raise PmsmSysidError(f"--wait must be >= 0, got {args.wait}")
     if args.burst < 1 or not args.drain_rate > 0:
-        raise SysIdError("--burst must be >= 1 and --drain-rate > 0")
+        raise PmsmSysidError("--burst must be >= 1 and --drain-rate > 0")
     return rate
 
 

@@ -64,7 +64,7 @@ def _value(text: str) -> Any:
 
 def node_params(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
     """Per-node parameter overrides from the options and ``--set``."""
-    from ..core.errors import SysIdError
+    from ..core.errors import PmsmSysidError
 
     out: dict[str, dict[str, Any]] = {"sim": {}, "identifier": {}, "gfrf": {}}
     ident = out["identifier"]
@@ -79,23 +79,23 @@ def node_params(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
         name, sep, text = item.partition("=")
         node, dot, param = name.partition(".")
         if not sep or not dot or node not in out or not param:
-            raise SysIdError(f"--set takes NODE.PARAM=VALUE with NODE sim, identifier or gfrf "
+            raise PmsmSysidError(f"--set takes NODE.PARAM=VALUE with NODE sim, identifier or gfrf "
                              f"(got '{item}')")
         out[node][param] = _value(text)
     return out
 
 
 def _check(args: argparse.Namespace) -> None:
-    from ..core.errors import SysIdError
+    from ..core.errors import PmsmSysidError
 
     if args.duration is not None and not args.duration > 0:
-        raise SysIdError(f"--duration must be > 0, got {args.duration}")
+        raise PmsmSysidError(f"--duration must be > 0, got {args.duration}")
     if not args.rate >= 0:
-        raise SysIdError(f"--rate must be >= 0, got {args.rate}")
+        raise PmsmSysidError(f"--rate must be >= 0, got {args.rate}")
     if args.rate != 1.0 and args.clock != "sim":
-        raise SysIdError("--rate applies to --clock sim only")
+        raise PmsmSysidError("--rate applies to --clock sim only")
     if not args.wait >= 0:
-        raise SysIdError(f"--wait must be >= 0, got {args.wait}")
+        raise PmsmSysidError(f"--wait must be >= 0, got {args.wait}")
 
 
 def _headline(s: dict[str, Any]) -> str:

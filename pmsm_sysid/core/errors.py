@@ -1,21 +1,21 @@
-"""Error types, one per area. The CLI turns any :class:`SysIdError` into one line and exit 2."""
+"""Error types, one per area. The CLI turns any :class:`PmsmSysidError` into one line and exit 2."""
 
 from __future__ import annotations
 
 
-class SysIdError(Exception):
+class PmsmSysidError(Exception):
     """Base of every error the project raises on bad input or an impossible request."""
 
 
-class PlantError(SysIdError):
+class PlantError(PmsmSysidError):
     """A plant file or plant parameters are invalid."""
 
 
-class ExcitationError(SysIdError):
+class ExcitationError(PmsmSysidError):
     """An excitation signal cannot be generated as asked."""
 
 
-class DataError(SysIdError):
+class DataError(PmsmSysidError):
     """Signals are unusable: NaN/Inf, gaps, wrong lengths, ranges outside the recording."""
 
 
@@ -23,17 +23,21 @@ class InsufficientExcitationError(DataError):
     """The data do not excite the system enough to identify the requested model."""
 
 
-class IdentificationError(SysIdError):
+class IdentificationError(PmsmSysidError):
     """Structure selection or estimation failed (e.g. rank-deficient candidate set)."""
 
 
-class GfrfError(SysIdError):
+class GfrfError(PmsmSysidError):
     """A model cannot be mapped to GFRFs as asked (bad model, bad frequencies, grid too big)."""
 
 
-class DiagnoseError(SysIdError):
+class DiagnoseError(PmsmSysidError):
     """The sim-to-real diagnosis cannot run on the given plant and recording."""
 
 
-class BagError(SysIdError):
+class BagError(PmsmSysidError):
     """A recording cannot be read or written (missing, corrupt, unknown storage, wrong types)."""
+
+
+#: Former name of :class:`PmsmSysidError`, kept so older code that catches it still works.
+SysIdError = PmsmSysidError

@@ -52,7 +52,7 @@ from .change import (
     FeatureSpec,
     jaccard_distance,
 )
-from .errors import DataError, SysIdError
+from .errors import DataError, PmsmSysidError
 from .gfrf import Gfrf
 from .identifiability import excitation_summary
 from .identify import METHODS, FitConfig, IdentifyResult, fit_narx, validate_narx
@@ -213,7 +213,7 @@ class WindowTracker:
         for name, track in self._tracks.items():
             try:
                 self._one(track, w, fs, info, acc)
-            except SysIdError as exc:
+            except PmsmSysidError as exc:
                 acc["errors"].append({"output": name, "model_id": f"{name}/{w.seq}",
                                       "window": info, "error": f"{type(exc).__name__}: {exc}"})
         return WindowResult(w.seq, w.start_stamp, w.end_stamp,
@@ -332,7 +332,7 @@ def h1_features(model: NarxModel, f_norm: float) -> dict[str, float]:
     """Gain (dB) and phase (rad) of the model's H1 (seed Eq. 7) at ``f_norm``."""
     try:
         h = complex(Gfrf.from_model(model).h1(np.array([f_norm]))[0])
-    except SysIdError:
+    except PmsmSysidError:
         return {"h1_gain_db": math.nan, "h1_phase_rad": math.nan}
     if not (abs(h) > 0 and math.isfinite(abs(h))):  # no linear input path: no H1 to watch
         return {"h1_gain_db": math.nan, "h1_phase_rad": math.nan}

@@ -39,7 +39,7 @@ _Item = tuple[str, float]  # (raw JSON, monotonic time received)
 
 def analyse_message(text: str, orders: tuple[int, ...] = (1, 2, 3)) -> dict[str, Any]:
     """The ridges JSON of one model message (pure: what the worker thread runs)."""
-    from ..core.errors import SysIdError
+    from ..core.errors import PmsmSysidError
     from ..core.gfrf_analysis import analyse_json
 
     t0 = time.perf_counter()
@@ -51,7 +51,7 @@ def analyse_message(text: str, orders: tuple[int, ...] = (1, 2, 3)) -> dict[str,
         raise GfrfError("model message is not a JSON object")
     try:
         res = analyse_json(model, orders=orders).to_dict()
-    except SysIdError as exc:
+    except PmsmSysidError as exc:
         raise GfrfError(f"model {model.get('model_id', '?')}: {exc}") from exc
     res.update({"model_id": model.get("model_id"), "output": model.get("output"),
                 "window": model.get("window"),

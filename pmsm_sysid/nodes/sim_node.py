@@ -45,7 +45,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
-from ..core.errors import ExcitationError, SysIdError
+from ..core.errors import ExcitationError, PmsmSysidError
 from ..core.excitation import DEFAULT_AMPLITUDE_N, EXCITATIONS, ExcitationSource
 from ..core.physics import MotorSimulator
 from ..core.plant import EFFECT_BLOCKS, Plant, nominal_plant, plant_from_dict, plant_to_dict
@@ -271,14 +271,14 @@ class MotorSimNode(Node):
         changes = {p.name: p.value for p in params}
         try:
             self._apply(changes)
-        except SysIdError as exc:
+        except PmsmSysidError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def _apply(self, changes: dict[str, Any]) -> None:
         fixed = [n for n in changes if n in FIXED and changes[n] != self.values[n]]
         if fixed:
-            raise SysIdError(f"{', '.join(fixed)} cannot change while the node runs")
+            raise PmsmSysidError(f"{', '.join(fixed)} cannot change while the node runs")
         candidate = {**self.values, **changes}
         check_run_values(candidate)
         plant = plant_from_parameters(candidate)
@@ -296,20 +296,21 @@ class MotorSimNode(Node):
 
 
 def check_run_values(values: Mapping[str, Any]) -> None:
-    """Validate the non-plant parameters; SysIdError naming the bad one."""
+    """Validate the non-plant parameters; PmsmSysidError naming the bad one."""
     if values["clock"] not in ("wall", "sim"):
-        raise SysIdError(f"clock must be 'wall' or 'sim', got '{values['clock']}'")
+        raise PmsmSysidError(f"clock must be 'wall' or 'sim', got '{values['clock']}'")
     if values["excitation"] not in EXCITATIONS:
         raise ExcitationError(f"unknown excitation '{values['excitation']}'")
     rate = values["rate"]
     if not (math.isfinite(rate) and rate >= 0):
-        raise SysIdError(f"rate must be >= 0 (0 = as fast as possible), got {rate}")
+        raise PmsmSysidError(f"rate must be >= 0 (0 = as fast as possible), got {rate}")
     if values["clock"] == "wall" and rate != 1.0:
-        raise SysIdError("rate applies to clock=sim only (the wall clock runs at 1x)")
+        raise PmsmSysidError("rate applies to clock=sim only (the wall clock runs at 1x)")
     if values["burst"] < 1:
-        raise SysIdError(f"burst must be >= 1, got {values['burst']}")
+        raise PmsmSysidError(f"burst must be >= 1, got {values['burst']}")
     if values["max_samples"] < 0:
-        raise SysIdError(f"max_samples must be >= 0 (0 = unlimited), got {values['max_samples']}")
+        raise PmsmSysidError(
+            f"max_samples must be >= 0 (0 = unlimited), got {values['max_samples']}")
     if values["amplitude_n"] < 0 or not math.isfinite(values["amplitude_n"]):
         raise ExcitationError(f"amplitude_n must be a finite number >= 0, got "
                               f"{values['amplitude_n']}")

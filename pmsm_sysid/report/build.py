@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..core.errors import DataError, SysIdError
+from ..core.errors import DataError, PmsmSysidError
 from ..core.identify import FitConfig
 from .html import Facts, Note, Section, write_page
 from .sink import Sink
@@ -126,7 +126,7 @@ def _identify(d: dict[str, Any], rec: Any, sink: Sink, files: tuple[Path, ...],
                     *identify.json_only_sections(d, why or "no recording")]
     try:
         g = analyse_json(d).to_dict()
-    except SysIdError as exc:
+    except PmsmSysidError as exc:
         sink.notes.append(f"GFRFs not computed: {exc}")
         sections.append(Section("Frequency domain", (Facts((("GFRFs", str(exc)),)),)))
     else:

@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ..core.errors import SysIdError
+from ..core.errors import PmsmSysidError
 from .html import Block, Facts, Note, Section, Table
 
 
@@ -129,7 +129,7 @@ def rerun(d: Mapping[str, Any], json_path: Path) -> tuple[Any, str]:
     try:
         result = diagnose(plant_from_dict(d["plant"]), read_recording(real).recording,
                           read_recording(val).recording if val else None, opts)
-    except (SysIdError, KeyError, TypeError, ValueError) as exc:
+    except (PmsmSysidError, KeyError, TypeError, ValueError) as exc:
         return None, f"the diagnosis could not be repeated ({exc})"
     if not _same(d, result.to_dict()):
         return None, ("repeating the diagnosis on the recordings found today gave other "

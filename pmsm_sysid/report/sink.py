@@ -36,11 +36,11 @@ class Sink:
     def attempt(self, what: str, make: Callable[[], Plot]) -> Image | Note:
         """A figure that may be impossible for this input (e.g. an unstable model's
         free run): the page then says why instead of failing the whole report."""
-        from ..core.errors import SysIdError
+        from ..core.errors import PmsmSysidError
 
         try:
             return self.figure(make())
-        except SysIdError as exc:
+        except PmsmSysidError as exc:
             self.tick()
             text = f"{what}: not drawn ({exc})"
             self.notes.append(text)

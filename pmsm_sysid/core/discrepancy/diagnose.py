@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DiagnoseError, PlantError, SysIdError
+from ..errors import DiagnoseError, PlantError, PmsmSysidError
 from ..plant import Plant
 from ..signals import Recording, check_finite
 from .estimate import Fit, contributions, design, refine
@@ -202,7 +202,7 @@ def diagnose(plant: Plant, real: Recording, validate: Recording | None = None,
     opts = options or DiagnoseOptions()
     try:
         return _diagnose(plant, real, validate, opts)
-    except SysIdError:
+    except PmsmSysidError:
         raise
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise DiagnoseError(f"diagnosis failed on these data: {exc}") from exc

@@ -41,7 +41,7 @@ from scipy.signal import welch
 from scipy.special import gammaln
 
 from ..candidates import candidate_set
-from ..errors import SysIdError
+from ..errors import PmsmSysidError
 from ..gfrf_analysis import GfrfAnalysis, analyse, nonlinear_err
 from ..identifiability import ExcitationSummary, excitation_summary
 from ..identify import FitConfig, NarxFit, fit_narx
@@ -194,7 +194,7 @@ def gfrf_where(plant: Plant, rec: Recording, alpha: float = 1e-3) -> dict[str, A
     try:
         return head | _compare(plant, rec, alpha) | {
             "timing_ms": 1e3 * (time.perf_counter() - t0)}
-    except (SysIdError, ValueError, np.linalg.LinAlgError) as exc:
+    except (PmsmSysidError, ValueError, np.linalg.LinAlgError) as exc:
         return head | {"skipped": True, "ridges_only_in_real": [], "peaks_only_in_real": [],
                        "note": f"GFRF comparison not possible on these data: {exc}"}
 
