@@ -43,6 +43,19 @@ def _models_from_bag(bag: Path) -> dict[str, dict[str, Any]]:
     return out
 
 
+def _recorded_inputs(bag: Path) -> int:
+    """Input messages the recorder has committed (metadata.yaml is rewritten at each flush)."""
+    import yaml
+
+    try:
+        info: Any = yaml.safe_load((bag / "metadata.yaml").read_text())
+        topics = info["rosbag2_bagfile_information"]["topics_with_message_count"]
+        return sum(int(t["message_count"]) for t in topics
+                   if t["topic_metadata"]["name"].startswith("/pmsm/"))
+    except (OSError, yaml.YAMLError, KeyError, TypeError):
+        return 0
+
+
 class _Lines:
     """Reads a process's stderr in a thread (a full pipe would stall the process)."""
 
@@ -83,7 +96,10 @@ def test_two_processes_give_the_one_process_models(ros_context: Any, ros_env: in
                               "--json", str(tmp_path / "sim.json")],
                              env=env, capture_output=True, text=True, timeout=120)
         assert sim.returncode == 0, sim.stderr
-        time.sleep(3.0)  # the last samples arrive; then stop it as a user would
+        # stop it as a user would, once the last samples have arrived (the recorder has them)
+        deadline = time.monotonic() + 120
+        while _recorded_inputs(bag) < 3 * SECONDS * 500 and time.monotonic() < deadline:
+            time.sleep(0.2)
         ident.send_signal(signal.SIGTERM)
         ident.wait(timeout=120)
         err_lines.thread.join(10)
