@@ -9,14 +9,14 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "bench"]),
-    package_data={PACKAGE: ["data/*.yaml", "py.typed"]},
+    package_data={PACKAGE: ["data/*.yaml", "py.typed", "report/templates/*.j2"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
         ("share/" + PACKAGE + "/msg_schemas", glob("msg_schemas/*.msg")),
     ],
     python_requires=">=3.10",
-    install_requires=["numpy", "scipy", "rosbags>=0.10", "PyYAML"],
+    install_requires=["numpy", "scipy", "rosbags>=0.10", "PyYAML", "Jinja2", "rich"],
     extras_require={
         "report": ["matplotlib"],
         "test": ["pytest", "pytest-xdist", "pytest-timeout", "hypothesis", "ruff", "mypy",

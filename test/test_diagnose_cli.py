@@ -71,6 +71,12 @@ def test_diagnose_json_report_and_corrected_plant(tmp_path: Path,
     assert {"diagnose_residual_time.png", "diagnose_residual_vs_position.png",
             "diagnose_residual_vs_velocity.png", "diagnose_fit.png"} <= set(pngs)
     assert all(name in html for name in pngs)
+    # the named effect has its own section: parameters with units, confidence, evidence,
+    # and its before/after figure embedded in the one-file page
+    assert "Effect: cogging" in html and "effect_cogging.png" in pngs
+    section = html[html.index("Effect: cogging"):]
+    assert "confidence" in section and "held-out data" in section and " m</dd>" in section
+    assert 'data-file="effect_cogging.png"' in section
 
 
 def test_json_to_stdout_keeps_the_summary_off_it(capsys: pytest.CaptureFixture[str]) -> None:

@@ -6,6 +6,7 @@ processes."""
 
 from __future__ import annotations
 
+import base64
 import json
 import os
 import re
@@ -82,18 +83,24 @@ def png_size(path: Path) -> tuple[int, int]:
 
 
 def check_page(index: Path, expected: set[str]) -> None:
-    """Every expected figure is a sensible PNG, referenced once, and nothing else is."""
+    """One self-contained page: every expected figure is embedded once as a base64 PNG equal
+    to the PNG kept beside the page, which is a sensible picture; nothing else is referenced
+    (no scripts, no external styles, no links out of the page)."""
     refs = page_refs(index)
-    srcs = [str(i["src"]) for i in refs.imgs]
-    assert sorted(srcs) == sorted(f"{n}.png" for n in expected)
-    assert "script" not in refs.tags
-    for url in refs.urls:  # self-contained: relative files and in-page anchors only
-        assert "://" not in url and not url.startswith("/"), url
+    names = [str(i["data-file"]) for i in refs.imgs]
+    assert sorted(names) == sorted(f"{n}.png" for n in expected)
+    assert not {"script", "link", "iframe", "object"} & refs.tags
+    for img in refs.imgs:
+        assert str(img["src"]).startswith("data:image/png;base64,"), img["data-file"]
+    for url in refs.urls:  # self-contained: embedded images and in-page anchors only
+        assert url.startswith(("#", "data:")), url[:80]
     from matplotlib import image
 
     for img in refs.imgs:
-        path = index.parent / str(img["src"])
+        path = index.parent / str(img["data-file"])
         assert path.is_file(), path
+        raw = base64.b64decode(str(img["src"]).split(",", 1)[1])
+        assert raw == path.read_bytes(), path  # the embedded figure is the saved one
         w, h = png_size(path)
         assert w >= 400 and h >= 300, (path, w, h)
         assert (str(w), str(h)) == (img["width"], img["height"])

@@ -1,6 +1,8 @@
 """The report page in a real browser: headless Chromium (Debian package ``chromium``) loads
-``index.html`` from disk; every image loads (naturalWidth/Height equal the PNG's), and in a
-full-page screenshot each image's box shows that figure (pixel correlation with the PNG).
+``index.html`` alone -- copied into an empty directory, so the PNGs beside it cannot be
+used, and with the network switched off -- every embedded image loads (naturalWidth/Height
+equal the PNG's), and in a full-page screenshot each image's box shows that figure (pixel
+correlation with the PNG).
 
 Chromium is installed by the fixture when it is missing and apt-get can run (as root);
 otherwise the test is skipped with the reason.
@@ -28,7 +30,7 @@ CHECK_JS = """<script>
 window.addEventListener('load', function () {
   var rows = Array.prototype.map.call(document.images, function (i) {
     var r = i.getBoundingClientRect();
-    return {src: i.getAttribute('src'), complete: i.complete, w: i.naturalWidth,
+    return {src: i.getAttribute('data-file'), complete: i.complete, w: i.naturalWidth,
             h: i.naturalHeight, x: r.left + window.scrollX, y: r.top + window.scrollY,
             dw: r.width, dh: r.height};
   });
@@ -79,7 +81,8 @@ def _run(exe: str, tmp: Path, url: str, *extra: str) -> subprocess.CompletedProc
     args = [exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
             "--no-first-run", "--disable-background-networking", "--disable-component-update",
             "--disable-sync", f"--user-data-dir={tmp / 'profile'}", "--hide-scrollbars",
-            "--force-device-scale-factor=1", "--virtual-time-budget=10000", *extra, url]
+            "--force-device-scale-factor=1", "--virtual-time-budget=10000",
+            "--host-resolver-rules=MAP * ~NOTFOUND", "--proxy-server=127.0.0.1:9", *extra, url]
     return subprocess.run(args, capture_output=True, text=True, timeout=180)
 
 
@@ -103,22 +106,19 @@ def _grey(img: Any, size: tuple[int, int] = (160, 120)) -> np.ndarray:
     return g.ravel()
 
 
-@pytest.mark.slow
-@pytest.mark.timeout(APT_TIMEOUT_S * 2 + 300)
-def test_report_images_load_in_headless_chromium(chromium: str, tmp_path: Path) -> None:
+def _check_in_browser(chromium: str, out: Path, figures: set[str], tmp_path: Path) -> None:
+    """The page ``out/index.html``, alone in an empty directory, in headless Chromium."""
     from PIL import Image
 
-    out = tmp_path / "report"
-    r = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "report", str(bundled_bag()),
-                        "--out", str(out)], capture_output=True, text=True, timeout=300,
-                       cwd=REPO)
-    assert r.returncode == 0, r.stderr
-    index = out / "index.html"
-    check_page(index, FIGURES)
+    check_page(out / "index.html", figures)
+    alone = tmp_path / "mailed"  # the page on its own, as a mail attachment would be
+    alone.mkdir()
+    index = Path(shutil.copy(out / "index.html", alone))
 
     rows = _image_rows(chromium, index, tmp_path)
     images = rows["images"]
-    assert sorted(i["src"] for i in images) == sorted(f"{n}.png" for n in FIGURES)
+    assert sorted(i["src"] for i in images) == sorted(f"{n}.png" for n in figures)
+    assert sorted(p.name for p in alone.iterdir()) == ["index.html"]
     for i in images:
         w, h = png_size(out / i["src"])
         assert i["complete"] and (i["w"], i["h"]) == (w, h), i  # loaded, the right file
@@ -143,3 +143,32 @@ def test_report_images_load_in_headless_chromium(chromium: str, tmp_path: Path) 
             # the box shows this figure (displayed at its natural size: nearly pixel-equal),
             # and it resembles no other figure as much
             assert best == i["src"] and corr[best] > 0.98, (i["src"], corr)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(APT_TIMEOUT_S * 2 + 300)
+def test_report_images_load_in_headless_chromium(chromium: str, tmp_path: Path) -> None:
+    out = tmp_path / "report"
+    r = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "report", str(bundled_bag()),
+                        "--out", str(out)], capture_output=True, text=True, timeout=300,
+                       cwd=REPO)
+    assert r.returncode == 0, r.stderr
+    _check_in_browser(chromium, out, FIGURES, tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(APT_TIMEOUT_S * 2 + 300)
+def test_diagnose_report_loads_in_headless_chromium(chromium: str, tmp_path: Path) -> None:
+    """diagnose --report: the common figures and one before/after figure per named effect."""
+    out = tmp_path / "report"
+    r = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "diagnose", "--plant",
+                        str(REPO / "plants" / "nominal.yaml"), "--real",
+                        str(REPO / "bags" / "concealed_two"), "--validate",
+                        str(REPO / "bags" / "concealed_two_validate"), "--no-gfrf",
+                        "--report", str(out)], capture_output=True, text=True, timeout=300,
+                       cwd=REPO)
+    assert r.returncode == 0, r.stderr
+    figures = {"diagnose_fit", "diagnose_residual_time", "diagnose_residual_vs_position",
+               "diagnose_residual_vs_velocity", "diagnose_speed_replay",
+               "effect_coulomb_friction", "effect_cogging"}
+    _check_in_browser(chromium, out, figures, tmp_path)

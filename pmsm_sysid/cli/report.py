@@ -1,10 +1,12 @@
 """``pmsm-sysid report (BAG | RESULT.json) --out DIR``: figures and tables as one HTML page.
 
 A recording is identified first with the same options as ``identify`` (defaults: the
-paper's speed case), then its GFRFs are computed; the page has the seed's figures (I/O
-series, PSDs, model predicted output, correlation tests, H1, H2, H3) and tables. An identify
-JSON is reported with the recording its ``source`` names; a gfrf or diagnose JSON with what
-it holds. Writes ``DIR/index.html`` and PNGs beside it; prints the page's path.
+paper's speed case), then its GFRFs are computed; the page has the figures of Liu et al.
+(2005) (I/O series, PSDs, model predicted output, correlation tests, H1, H2, H3) and its
+tables of model terms. An identify JSON is reported with the recording its ``source`` names;
+a gfrf or diagnose JSON with what it holds. Writes ``DIR/index.html``, one self-contained
+file with every figure embedded (it opens offline and can be mailed on its own), and the
+same figures as PNG files beside it; prints the page's path.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import sys
 from .common import write_json
 from .identify import add_model_options, fit_config
 
-HELP = "figures and tables of a recording or a result JSON as an HTML page with PNGs"
+HELP = "figures and tables of a recording or a result JSON as one self-contained HTML page"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

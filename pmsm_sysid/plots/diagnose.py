@@ -8,6 +8,8 @@ function                 shows
                          fitted curve drawn over it
 ``speed_replay``         measured speed and the short-horizon replays before/after
 ``fit_bars``             NRMSE before/after, estimation and held-out, force and speed
+``effect_before_after``  one named effect: the residual without it and with it, side by
+                         side over the effect's own axis, its fitted curve over the first
 =======================  ====================================================================
 
 Each returns a :class:`~.base.Plot` whose ``data`` holds what was drawn, read back from the
@@ -137,6 +139,50 @@ def fit_bars(result: DiagnoseResult) -> Plot:
                  "after": [float(r.get_height()) for r in a]})
 
 
+def _effect_axis(name: str) -> tuple[str, str, float]:
+    """(curves attribute, axis label, scale) of the axis an effect depends on."""
+    if name in POSITION_EFFECTS:
+        return "x", "position (mm)", 1e3
+    if name in VELOCITY_EFFECTS:
+        return "v", "speed (m/s)", 1.0
+    return "t", "time (s)", 1.0
+
+
+@styled
+def effect_before_after(result: DiagnoseResult, name: str,
+                        segment: str = "estimation") -> Plot:
+    """The force residual without the effect ``name`` modelled (left, with its fitted curve)
+    and with it (right), over the quantity the effect depends on. DataError when the
+    diagnosis has no fitted curve of that effect."""
+    from ..core.errors import DataError
+
+    c = result.curves
+    part = dict(c.parts.get(segment, [])).get(name)
+    if part is None:
+        raise DataError(f"{name}: the diagnosis holds no fitted curve of it")
+    attr, label, scale = _effect_axis(name)
+    arg = np.asarray(getattr(c, attr)[segment]) * scale
+    after = c.after[segment]
+    before = after + part
+    fig = new_figure(8.0, 3.0)
+    left, right = fig.subplots(1, 2, sharey=True)
+    (pb,) = left.plot(arg, before, ".", color="0.5", markersize=2, label="residual")
+    order = np.argsort(arg)
+    (curve,) = left.plot(arg[order], part[order], color="tab:red", label=f"fitted {name}")
+    (pa,) = right.plot(arg, after, ".", color="k", markersize=2, label="residual")
+    left.set_title(f"before: {name} not modelled")
+    right.set_title(f"after: {name} modelled")
+    left.set_ylabel("force residual (N)")
+    for ax in (left, right):
+        ax.set_xlabel(label)
+        ax.legend(loc="upper right")
+    return Plot(fig, f"effect_{name}",
+                f"{name}: force residual of the {segment} data over {label.split(' (')[0]} "
+                "before (left, the fitted curve in red) and after (right) it is modelled.",
+                {"arg": np.asarray(pb.get_xdata()), "before": np.asarray(pb.get_ydata()),
+                 "after": np.asarray(pa.get_ydata()), "curve": np.asarray(curve.get_ydata())})
+
+
 def figures(result: DiagnoseResult) -> list[Plot]:
     """Every figure of the diagnosis, in page order."""
     out = [fit_bars(result), residual_time(result),
@@ -147,7 +193,7 @@ def figures(result: DiagnoseResult) -> list[Plot]:
 
 
 def write_report(result: DiagnoseResult, out_dir: str | Path, title: str = "") -> Path:
-    """Save the figures as PNG in ``out_dir`` and write ``out_dir/index.html``."""
+    """Save the figures as PNG in ``out_dir`` and write the one-file page ``index.html``."""
     from ..report import diagnose as sections
     from ..report.html import Section, image, write_page
     from .base import save
@@ -158,7 +204,10 @@ def write_report(result: DiagnoseResult, out_dir: str | Path, title: str = "") -
     for plot in figures(result):
         images.append(image(save(plot, out), plot.caption))
         plot.figure.clear()
-    pages = sections.json_sections(result.to_dict())
+    doc = result.to_dict()
+    pages = sections.json_sections(doc)
     pages.insert(2, Section("Sim-to-real: figures", tuple(images)))
+    pages[3:3] = sections.effect_sections(doc, result,
+                                          lambda p: image(save(p, out), p.caption))
     return write_page(out, f"pmsm-sysid diagnose: {title}" if title else "pmsm-sysid diagnose",
                       pages)

@@ -183,7 +183,7 @@ def report_diagnose(d: Mapping[str, Any], json_path: Path, out_dir: str | Path) 
     """A diagnose JSON: its tables; the figures by repeating the diagnosis it describes."""
     from . import diagnose
 
-    sink = Sink(_prepare(out_dir), 2 + DIAGNOSE_FIGURES)
+    sink = Sink(_prepare(out_dir), 2 + DIAGNOSE_FIGURES + len(d.get("effects") or []))
     try:
         sections = diagnose.json_sections(d)
         result, why = diagnose.rerun(d, json_path)
@@ -193,6 +193,7 @@ def report_diagnose(d: Mapping[str, Any], json_path: Path, out_dir: str | Path) 
         else:
             sink.notes.append(f"diagnosis figures not drawn: {why}")
             sections.insert(2, Section("Sim-to-real: figures", (Note(sink.notes[-1]),)))
+        sections[3:3] = diagnose.effect_sections(d, result, sink.figure, why)
         return _finish(sink, f"pmsm-sysid report: {json_path.name}", sections, "diagnose")
     finally:
         sink.close()

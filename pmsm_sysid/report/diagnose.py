@@ -1,6 +1,8 @@
-"""Report sections of a sim-to-real diagnosis (the ``diagnose`` JSON, contract §3): where the
-mismatch lives, the named effects with their parameters, the corrected plant and the fit
-table before/after (:func:`json_sections`, also used by ``diagnose --report``).
+"""Report sections of a sim-to-real diagnosis (the ``diagnose`` JSON): where the mismatch
+lives, the named effects with their parameters, the corrected plant and the fit table
+before/after (:func:`json_sections`, also used by ``diagnose --report``), and one section per
+named effect with its parameters, confidence, evidence and before/after figure
+(:func:`effect_sections`).
 
 The figures need the diagnosis' series, which the JSON does not carry: :func:`rerun` repeats
 the diagnosis from the JSON's nominal plant, recordings (``real``, ``validate``) and
@@ -10,12 +12,16 @@ thresholds, checks it reproduces the JSON, and :mod:`pmsm_sysid.plots.diagnose` 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
 from ..core.errors import PmsmSysidError
-from .html import Block, Facts, Note, Section, Table
+from .html import Block, Facts, Image, Note, Section, Table
+
+UNITS = (("_n_per_mps", "N·s/m"), ("_n_per_m", "N/m"), ("_mps", "m/s"), ("_kg", "kg"),
+         ("_rad", "rad"), ("_n", "N"), ("_m", "m"), ("_s", "s"))
+HIDDEN = ("_means_n", "window_rms_n")
 
 
 def _v(x: Any) -> str:
@@ -143,3 +149,65 @@ def figure_section(result: Any, sink: Any) -> Section:
 
     images = tuple(sink.figure(plot) for plot in figures(result))
     return Section("Sim-to-real: figures", images)
+
+
+def _param(key: str, value: Any, std: Any) -> tuple[str, str]:
+    """(name, value with its standard error and unit) of one effect parameter."""
+    name, unit = key, ""
+    for suffix, u in UNITS:
+        if key.endswith(suffix):
+            name, unit = key[: -len(suffix)], u
+            break
+    if isinstance(value, list):
+        text = ", ".join(f"order {h['order']}: {float(h['amplitude_n']):.3g} N"
+                         if isinstance(h, dict) and "order" in h else _v(h) for h in value)
+        return name, text or "none"
+    text = _v(value)
+    if isinstance(value, float) and isinstance(std, float) and math.isfinite(std):
+        text = f"{value:.5g} ± {std:.2g}"
+    return name.replace("_", " "), f"{text} {unit}".strip()
+
+
+def _evidence(e: Mapping[str, Any]) -> tuple[tuple[str, str], ...]:
+    sig = float(e.get("significance") or 0.0)
+    rows = [("confidence", str(e.get("confidence", "n/a"))),
+            ("evidence", f"p = {10.0 ** -min(sig, 300.0):.2g} on the estimation data "
+                         f"(family-wise, Bonferroni-corrected F-test)"),
+            ("explains", f"{100 * float(e.get('explains') or 0):.1f}% of the nominal "
+                         "plant's force residual")]
+    h = e.get("held_out")
+    if h:
+        rows.append(("held-out data", f"mean-square residual {-100 * float(h['reduction']):+.0f}%"
+                     f" (z = {float(h['z']):.1f}): "
+                     + ("confirmed" if h.get("confirmed") else "not confirmed")))
+    alt = e.get("alternative")
+    if alt:
+        rows.append(("preferred over", f"{alt.get('name')} (Δχ² = "
+                     f"{float(alt.get('delta_chi2', math.nan)):.1f})"))
+    rows += [("note", str(n)) for n in e.get("notes") or []]
+    return tuple(rows)
+
+
+def effect_sections(d: Mapping[str, Any], result: Any,
+                    draw: Callable[[Any], Image], why: str = "") -> list[Section]:
+    """One section per named effect of the diagnose JSON ``d``: parameters, confidence,
+    evidence and its before/after figure (drawn from ``result``, the repeated diagnosis;
+    when it is None the section says ``why`` instead)."""
+    from ..plots.diagnose import effect_before_after
+
+    out = []
+    for e in d.get("effects") or []:
+        std = e.get("params_std") or {}
+        params = tuple(_param(k, v, std.get(k)) for k, v in (e.get("params") or {}).items()
+                       if not k.endswith(HIDDEN))
+        blocks: list[Block] = [Facts(params or (("parameters", "none"),)),
+                               Facts(_evidence(e))]
+        if result is None:
+            blocks.append(Note(f"before/after figure not drawn: {why}"))
+        else:
+            try:
+                blocks.append(draw(effect_before_after(result, str(e["name"]))))
+            except PmsmSysidError as exc:
+                blocks.append(Note(f"before/after figure not drawn: {exc}"))
+        out.append(Section(f"Effect: {e['name']}", tuple(blocks)))
+    return out
