@@ -1,4 +1,4 @@
-"""GFRF speed on the seed's 15-term thrust-speed model (Table 2, y(k-18) = -0.090082).
+"""GFRF speed on the paper's 15-term thrust-speed model (Table 2, y(k-18) = -0.090082).
 
 Target: H2 on a 256 x 256 grid in < 100 ms. There is no GFRF in the peer library
 (SysIdentPy 0.9.0), so the ratios are against two baselines measured in the same run:

@@ -1,4 +1,4 @@
-"""Soak and overload of the real-time pipeline (issue 8, Load).
+"""Soak and overload of the real-time pipeline.
 
 1. **Soak**: ``pmsm-sysid run`` (simulated motor + identifier + GFRF in one process, wall
    clock, 500 Hz) for ``--minutes`` (default 10). The process's resident memory is sampled

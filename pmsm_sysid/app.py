@@ -158,7 +158,7 @@ class Pipeline:
             self.executor.spin_once(timeout_sec=0.02)
 
     def summary(self) -> dict[str, Any]:
-        """The ``run --json`` summary (contract §3 keys plus per-node details)."""
+        """The ``run --json`` summary (the documented keys plus per-node details)."""
         return pipeline_summary(self)
 
 
@@ -323,7 +323,7 @@ def _pick(by_output: Mapping[str, Any], order: Sequence[str]) -> Any:
 
 
 def pipeline_summary(pipe: Pipeline) -> dict[str, Any]:
-    """Contract keys (samples_received, samples_dropped, windows_fitted, windows_skipped,
+    """Keys (samples_received, samples_dropped, windows_fitted, windows_skipped,
     last_model, last_ridges, last_validation) plus change_events and per-node details.
     Counters of a node this process does not run are null."""
     ident, gfrf, sim = pipe.identifier, pipe.gfrf, pipe.sim

@@ -5,7 +5,7 @@
   (executor, nodes, context).
 - :func:`stop_on_signals`: SIGINT/SIGTERM set a stop event instead of raising, so a verb can
   leave its spin loop and finalise its output (a bag, a JSON file) cleanly.
-- Stamp and message helpers: nanoseconds <-> ``builtin_interfaces/Time``, the contract's three
+- Stamp and message helpers: nanoseconds <-> ``builtin_interfaces/Time``, the standard three
   stamped messages <-> floats, message classes from rosbag2 type names.
 - :func:`data_qos`: the QoS of the data topics (reliable, keep-last 1000).
 """
@@ -167,7 +167,7 @@ def stamp_to_ns(stamp: Any) -> int:
     return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
 
 
-# --- the contract's three messages ------------------------------------------------------
+# --- the standard three messages ------------------------------------------------------
 
 def message_class(type_name: str) -> Any:
     """Python class of a rosbag2 type name like ``geometry_msgs/msg/WrenchStamped``."""
@@ -183,7 +183,7 @@ def message_class(type_name: str) -> Any:
 
 def make_sample_messages(stamp_ns: int, thrust: float, speed: float, position: float,
                          frame_id: str = "") -> dict[str, Any]:
-    """The three messages of one sample (contract §1), sharing one header stamp."""
+    """The three messages of one sample, sharing one header stamp."""
     msgs = {sig: message_class(t)() for sig, t in INPUT_TYPES.items()}
     stamp = stamp_from_ns(stamp_ns)
     for msg in msgs.values():
@@ -196,7 +196,7 @@ def make_sample_messages(stamp_ns: int, thrust: float, speed: float, position: f
 
 
 def sample_value(signal_name: str, msg: Any) -> float:
-    """The contract field of one input message: force.x, linear.x or point.x."""
+    """The data field of one input message: force.x, linear.x or point.x."""
     if signal_name == THRUST:
         return float(msg.wrench.force.x)
     if signal_name == SPEED:

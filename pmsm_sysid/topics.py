@@ -1,4 +1,4 @@
-"""Topic names and layouts shared by nodes, recorder, replay and monitor (contract §1).
+"""Topic names and layouts shared by nodes, recorder, replay and monitor.
 
 No ROS imports here: message type names are strings as rosbag2 writes them.
 """

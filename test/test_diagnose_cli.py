@@ -1,4 +1,4 @@
-"""``pmsm-sysid diagnose``: the contract's JSON, the report, and one-line errors (exit 2)."""
+"""``pmsm-sysid diagnose``: the standard JSON, the report, and one-line errors (exit 2)."""
 
 from __future__ import annotations
 

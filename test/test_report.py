@@ -1,7 +1,7 @@
 """``pmsm-sysid report`` on the bundled recording: every figure is a valid PNG referenced by
 the page, and the figures are right -- checked against the recording read by the stock
-rosbags reader, an independent implementation of the model predicted output (seed Eq. 12),
-the identify JSON's correlation tests and the ``gfrf`` verb's JSON, run as separate
+rosbags reader, an independent implementation of the model predicted output (Eq. 12 of Liu et al.
+2005), the identify JSON's correlation tests and the ``gfrf`` verb's JSON, run as separate
 processes."""
 
 from __future__ import annotations
@@ -178,7 +178,7 @@ def test_marked_ridges_are_the_gfrf_json_ridges(built: ReportResult,
 
 @pytest.mark.slow
 def test_seed_table2_model_ridges(tmp_path: Path) -> None:
-    """The seed's own Table 2 model (no recording): its H2 ridges of all three kinds, drawn
+    """The paper's own Table 2 model (no recording): its H2 ridges of all three kinds, drawn
     where the gfrf verb puts them; the page says why there are no time-domain figures."""
     model = REPO / "examples" / "paper_table2_speed.json"
     res = build_report(model, tmp_path / "rep")
@@ -285,7 +285,7 @@ def test_time_series_are_the_recording_and_eq12(built: ReportResult,
 def test_psd_peaks_at_the_excitation(built: ReportResult) -> None:
     data = built.data["psd"]
     meta = (BAG / "metadata.yaml").read_text()
-    assert "paper-speed" in meta  # the seed's speed experiment: thrust at 16.5 Hz
+    assert "paper-speed" in meta  # the paper's speed experiment: thrust at 16.5 Hz
     assert data["peak_u_norm"] * 500.0 == pytest.approx(16.5, abs=500.0 / 512)
     assert data["peak_y_norm"] * 500.0 == pytest.approx(16.5, abs=500.0 / 512)
 

@@ -1,11 +1,11 @@
-"""rosbag2 I/O: the only package that touches recordings on disk (contract §2).
+"""rosbag2 I/O: the only package that touches recordings on disk.
 
 Bags are stock rosbag2 directories (``metadata.yaml`` + ``.mcap`` or ``.db3``) written with
 ``rosbags``: message definitions and type hashes are embedded and offered QoS profiles are
 in the metadata, so ``ros2 bag info``, Foxglove and a plain ``rosbags`` ``AnyReader`` read
 them without this package.
 
-- :func:`write_recording` / :func:`read_recording`: whole recordings (contract §1 topics);
+- :func:`write_recording` / :func:`read_recording`: whole recordings (the three input topics);
 - :func:`iter_raw`, :func:`bag_topics`: serialized messages in log order, for replay;
 - :class:`BagRecorder`, :func:`repair`: streaming recording that survives being killed;
 - :func:`typestore`: ROS 2 Jazzy types plus the package's ``msg_schemas`` as

@@ -1,4 +1,4 @@
-"""Direct CDR coding of the three stamped input messages (contract §1), ~10x faster than the
+"""Direct CDR coding of the three stamped input messages, ~10x faster than the
 generic ``rosbags`` (de)serializer on long recordings; tests check it byte for byte against
 ``rosbags``. Layout (little-endian CDR, alignment counted after the 4-byte encapsulation
 header): ``int32 sec, uint32 nanosec, uint32 len(frame_id)+1, frame_id, NUL, pad to 8``, then

@@ -1,4 +1,4 @@
-"""Writing whole recordings (contract §1 topics) as rosbag2 bags."""
+"""Writing whole recordings (the three input topics) as rosbag2 bags."""
 
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ def write_recording(
     extra_points: Mapping[str, FloatArray] | None = None,
     custom_data: Mapping[str, str] | None = None,
 ) -> None:
-    """Write ``rec`` as the contract's three topics, all stamped ``header.stamp = rec.t``.
+    """Write ``rec`` as the standard three topics, all stamped ``header.stamp = rec.t``.
 
     Receive time = stamp. A recording whose speed is derived gets no speed topic (readers
     derive it again; the bag's ``custom_data`` says so). ``extra_points`` adds one

@@ -1,4 +1,4 @@
-"""``pmsm-sysid <verb>``: one entry point for every tool (contract §3).
+"""``pmsm-sysid <verb>``: one entry point for every tool.
 
 Each verb lives in its own module ``pmsm_sysid.cli.<verb>`` exposing ``HELP`` (one line),
 ``add_arguments(parser)`` and ``run(args) -> int``. Verb modules import only the standard

@@ -6,7 +6,7 @@ library of interpretable physics (forward regression by ERR, prewhitened F-tests
 Bonferroni correction, held-out confirmation), estimates their parameters with standard
 errors, writes the corrected plant and shows the fit before/after on estimation and held-out
 data. Held-out data: ``--validate BAG2``, else the last 30 % of the recording. ``--json``
-writes the contract's diagnose JSON; ``--report DIR`` writes figures and an index.html.
+writes the diagnose JSON; ``--report DIR`` writes figures and an index.html.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ HELP = "sim-to-real: locate the mismatch, name the missing physics, model it, sh
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plant", required=True, metavar="PLANT.yaml",
-                   help="the simulation's plant file (contract §4)")
+                   help="the simulation's plant file")
     p.add_argument("--real", required=True, metavar="BAG", help="the real recording (rosbag2)")
     p.add_argument("--validate", metavar="BAG2",
                    help="held-out recording (default: the last 30%% of --real)")

@@ -3,8 +3,8 @@
 Defaults reproduce the paper's speed case: thrust -> speed, ny = 30, nu = 40, quadratic,
 15 terms, estimation samples 1000:2000 and validation 3000:4000 (the paper's points
 1001-2000 and 3001-4000). ``--output position --ny 10 --nu 10`` is the paper's second case.
-Prints the term table in the layout of the seed's Tables 2 and 3 (term, estimate, standard
-deviation, ERR) and the validation summary; ``--json FILE`` writes the contract's JSON.
+Prints the term table in the layout of the paper's Tables 2 and 3 (term, estimate, standard
+deviation, ERR) and the validation summary; ``--json FILE`` writes the identify JSON.
 """
 
 from __future__ import annotations

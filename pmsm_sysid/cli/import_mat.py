@@ -1,4 +1,4 @@
-"""``pmsm-sysid import-mat MAT --out BAG``: the EMPS ``.mat`` layout as a recording (contract §2).
+"""``pmsm-sysid import-mat MAT --out BAG``: the EMPS ``.mat`` layout as a recording.
 
 Keys: ``t`` (s), ``qm`` measured position (m), ``qg`` reference position (m), ``vir``
 controller output (V), ``gtau`` (N/V), ``kp``, ``kv``. Written: ``<ns>/thrust`` =

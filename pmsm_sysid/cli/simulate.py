@@ -1,4 +1,4 @@
-"""``pmsm-sysid simulate``: run the motor model offline and write a recording (contract §3)."""
+"""``pmsm-sysid simulate``: run the motor model offline and write a recording."""
 
 from __future__ import annotations
 

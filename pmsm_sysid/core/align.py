@@ -1,4 +1,4 @@
-"""Stamp alignment of the three input streams into one :class:`Recording` (contract §1).
+"""Stamp alignment of the three input streams into one :class:`Recording`.
 
 One sample is the thrust, speed and position messages that carry the same ``header.stamp``.
 Real recordings jitter, so stamps are matched within a tolerance (default: half the sample

@@ -1,4 +1,4 @@
-"""Candidate term sets of a polynomial NARX model (seed Eqs. 3 and 5).
+"""Candidate term sets of a polynomial NARX model (Eqs. 3 and 5 of Liu et al. 2005).
 
 The candidates are every monomial of degree 0..``degree`` in the *base signals*
 
@@ -63,7 +63,7 @@ class CandidateSet:
         return list(self.term_names)
 
     def position(self, term: Term | str) -> int:
-        """Index of ``term`` (a Term or a seed-style name) in this set."""
+        """Index of ``term`` (a Term or a paper-style name) in this set."""
         t = Term.parse(term) if isinstance(term, str) else term
         try:
             return _positions(self.structure)[t]

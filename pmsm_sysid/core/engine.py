@@ -130,7 +130,7 @@ class OnlineEngine(Generic[R]):
 
     # -- subscription path ------------------------------------------------------------
     def push(self, signal: str, stamp_ns: int, value: float) -> None:
-        """One message of one signal (contract §1)."""
+        """One message of one signal."""
         self._store(self.aligner.push(signal, stamp_ns, value))
 
     def push_sample(self, stamp_ns: int, values: Sequence[float]) -> None:

@@ -1,17 +1,19 @@
-"""Thrust excitation signals (issue 2 item 4), seeded and deterministic.
+"""Thrust excitation signals, seeded and deterministic.
 
 Every signal is a pure function of the sample index ``k`` (and the seed), so any block of it
 can be produced on its own: ``block(0, 10) == concat(block(0, 4), block(4, 6))``. The random
 signals (multisine, PRBS, APRBS) and the chirp are periodic with a documented period.
 
 ``amplitude_n`` is the peak thrust |F| (N). For the two paper signals it is the amplitude of
-the main tone. Defaults suit the 83 W, 1 m/s motor of the seed's Table 1 (B = 32.5 N/(m/s)):
+the main tone. Defaults suit the 83 W, 1 m/s motor of the paper's Table 1 (B = 32.5 N/(m/s)):
 
-* ``paper-speed``: sine at 16.5 Hz (0.033 cycles/sample at 500 Hz, seed Fig. 3), 50 N, giving
-  speeds of about +-20 cm/s (seed Fig. 2).
-* ``paper-position``: sine at 11.5 Hz (0.023 cycles/sample, seed Fig. 8), 40 N, plus a slow
-  positioning move (cosine at 0.5 Hz, 3 N) that gives the cm-scale travel of seed Fig. 7 and
-  the output energy near 0 Hz the seed reports.
+* ``paper-speed``: sine at 16.5 Hz (0.033 cycles/sample at 500 Hz, Fig. 3 of Liu et al. (2005)), 50
+N, giving
+  speeds of about +-20 cm/s (Fig. 2 of Liu et al. 2005).
+* ``paper-position``: sine at 11.5 Hz (0.023 cycles/sample, Fig. 8 of Liu et al. (2005)), 40 N,
+plus a slow
+  positioning move (cosine at 0.5 Hz, 3 N) that gives the cm-scale travel of Fig. 7 of Liu et al.
+  (2005) and the output energy near 0 Hz the paper reports.
 * ``multisine``: flat amplitude spectrum on every FFT line of one period within
   [f_min_hz, f_max_hz], random (seeded) or Schroeder phases, scaled to the peak.
 * ``chirp``: swept sine f0_hz -> f1_hz over period_s (linear or logarithmic), repeated.

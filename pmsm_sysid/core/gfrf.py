@@ -1,7 +1,8 @@
-"""Generalised frequency response functions of a polynomial NARX model (seed Eqs. 7-9).
+"""Generalised frequency response functions of a polynomial NARX model (Eqs. 7-9 of Liu et al.
+2005).
 
 The model y(k) = sum_t theta_t prod y(k-l) prod u(k-m) is mapped to its GFRFs H_n by the
-recursive probing algorithm of Peyton Jones & Billings (1989), the seed's Eqs. 7-8:
+recursive probing algorithm of Peyton Jones & Billings (1989), the paper's Eqs. 7-8:
 
     L_n(f1..fn) H_n^asym(f1..fn) = sum c_{0,n} e^{-j2pi(f1 m1 + ... + fn mn)}
         + sum_{q=1}^{n-1} sum_{p=1}^{n-q} c_{p,q} e^{-j2pi(f_{n-q+1} m_1 + ... + f_n m_q)}
@@ -183,7 +184,8 @@ class Gfrf:
         return f, self.h(f[:, None], f[None, :])
 
     def h3_slice(self, n: int = 128, fmax: float = 0.5) -> tuple[FloatArray, ComplexArray]:
-        """H3^sym on the slice f1 = f3 (seed Fig. 14): H[i, j] = H3(f[i], f[j], f[i])."""
+        """H3^sym on the slice f1 = f3 (Fig. 14 of Liu et al. 2005): H[i, j] = H3(f[i], f[j],
+        f[i])."""
         f = np.linspace(-fmax, fmax, _check_grid(n))
         return f, self.h(f[:, None], f[None, :], f[:, None])
 

@@ -1,4 +1,4 @@
-"""One identified model in the frequency domain: the content of the gfrf JSON (contract §3).
+"""One identified model in the frequency domain: the content of the gfrf JSON.
 
 :func:`analyse` maps a :class:`NarxModel` to its GFRFs (core/gfrf), finds H1 peaks and H2/H3
 ridges (core/ridges), reports the poles of the linear part with a stability flag (an unstable
@@ -136,8 +136,8 @@ def _grid(g: Gfrf, n: int) -> dict[str, Any]:
 
 
 def nonlinear_err(model: NarxModel) -> float | None:
-    """Sum of the ERR (seed Eq. 4) of the terms of degree >= 2: the share of the output
-    variance the nonlinear terms explain; None when the model carries no ERR values."""
+    """Sum of the ERR (Eq. 4 of Liu et al. 2005) of the terms of degree >= 2: the share of the
+    output variance the nonlinear terms explain; None when the model carries no ERR values."""
     errs = [float(e) for t, e in zip(model.terms, model.err, strict=True) if t.degree > 1]
     if not errs:
         return 0.0

@@ -36,7 +36,7 @@ class FitConfig:
     ``criterion``: ``terms`` (exactly ``n_terms``), ``err`` (stop once 1 - sum ERR < rho, at
     most ``n_terms``), ``aic``/``bic`` (size minimising the criterion, at most ``n_terms``).
     ``method``: ``iofr`` (FROLS + exact term exchange, :mod:`.iofr`; default) or ``ofr`` (the
-    seed's classic FROLS, :mod:`.ofr`). ``remove_dc``: the seed's d.c. removal in Eq. 4 (the
+    paper's classic FROLS, :mod:`.ofr`). ``remove_dc``: the paper's d.c. removal in Eq. 4 (the
     constant is then always in the model); needs ``structure.constant``.
     """
 
@@ -172,8 +172,8 @@ def fit_narx(
 
 @dataclass(frozen=True)
 class ValidationReport:
-    """Seed §II.3: model predicted output (Eq. 12) on the estimation and an independent
-    validation window, one-step-ahead R^2, and the correlation tests (Eq. 13) on the
+    """Section II.3 of Liu et al. (2005): model predicted output (Eq. 12) on the estimation and an
+    independent validation window, one-step-ahead R^2, and the correlation tests (Eq. 13) on the
     one-step-ahead residuals of the estimation window."""
 
     estimation: FitMetrics
@@ -186,7 +186,7 @@ class ValidationReport:
     validation_diverged: bool = False
 
     def to_dict(self) -> dict[str, Any]:
-        """The contract's "validation" object."""
+        """The identify JSON's "validation" object."""
         est = {**self.estimation.to_dict(), "osa_r2": self.osa_r2,
                "free_run_diverged": self.estimation_diverged}
         val = None
@@ -234,7 +234,7 @@ def validate_narx(
 
 @dataclass(frozen=True)
 class IdentifyResult:
-    """One offline identification of a recording (the ``identify`` JSON, contract §3)."""
+    """One offline identification of a recording (the ``identify`` JSON)."""
 
     input: str
     output: str

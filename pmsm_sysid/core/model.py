@@ -1,7 +1,7 @@
-"""Polynomial NARX terms and identified models (seed Eqs. 3 and 5).
+"""Polynomial NARX terms and identified models (Eqs. 3 and 5 of Liu et al. 2005).
 
 A term is a product of lagged outputs y(k-i) and inputs u(k-j); the empty product is the
-constant. Names follow the seed's tables: ``y(k-1)``, ``u(k-10)``, ``y(k-1)u(k-10)``,
+constant. Names follow the paper's tables: ``y(k-1)``, ``u(k-10)``, ``y(k-1)u(k-10)``,
 ``y(k-10)^2``, ``const``. Lags are absolute (the input delay d is already included).
 """
 
@@ -73,7 +73,7 @@ class Term:
 
     @classmethod
     def parse(cls, name: str) -> Term:
-        """Parse a seed-style name; ``y(k-3)y(k-3)`` and ``y(k-3)^2`` are the same term."""
+        """Parse a paper-style name; ``y(k-3)y(k-3)`` and ``y(k-3)^2`` are the same term."""
         text = name.replace(" ", "")
         if text in ("const", "constant", "1"):
             return cls(())
@@ -149,7 +149,7 @@ class NarxModel:
         return [t.name for t in self.terms]
 
     def terms_json(self) -> list[dict[str, float | str]]:
-        """The ``terms`` list of the identify JSON (contract §3)."""
+        """The ``terms`` list of the identify JSON."""
         return [
             {"name": t.name, "estimate": float(e), "std": float(s), "err": float(r)}
             for t, e, s, r in zip(self.terms, self.estimates, self.std, self.err, strict=True)
@@ -166,7 +166,7 @@ class NarxModel:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> NarxModel:
-        """Read the identify JSON (contract §3); raises IdentificationError on bad content."""
+        """Read the identify JSON; raises IdentificationError on bad content."""
         try:
             rows: Sequence[Mapping[str, Any]] = d["terms"]
             terms = tuple(Term.parse(str(r["name"])) for r in rows)

@@ -1,17 +1,19 @@
-"""Forward regression with orthogonal least squares (FROLS) and the ERR of seed Eq. 4.
+"""Forward regression with orthogonal least squares (FROLS) and the ERR of Eq. 4 of Liu et al.
+(2005).
 
 At step i every remaining candidate p_j is orthogonalised against the terms already chosen,
 w_j = p_j - sum_l (q_l^T p_j) q_l (q_l orthonormal), and the candidate with the largest
 
     ERR_j = g_j^2 ||w_j||^2 / S,   g_j = w_j^T r / ||w_j||^2,   S = sum_k (y(k) - ybar)^2
 
-is taken (seed Eq. 4; r is the current residual, so g_j^2 ||w_j||^2 = (p_j^T r)^2 / ||w_j||^2).
-Nothing is re-orthogonalised per candidate: two running vectors hold ``a_j = p_j^T r`` and
+is taken (Eq. 4 of Liu et al. 2005; r is the current residual, so g_j^2 ||w_j||^2 = (p_j^T r)^2 /
+||w_j||^2). Nothing is re-orthogonalised per candidate: two running vectors hold ``a_j = p_j^T r``
+and
 ``s_j = ||w_j||^2`` and are updated with one projection ``c = P^T q`` per step
 (``s -= c^2``, ``a -= (q^T r) c``), i.e. classical Gram-Schmidt done as BLAS-2/3 updates.
 The chosen column itself is re-orthogonalised twice (CGS2) from its explicit values.
 
-d.c. level (``remove_dc``): the seed removes the mean from y in Eq. 4. Done consistently,
+d.c. level (``remove_dc``): the paper removes the mean from y in Eq. 4. Done consistently,
 that is orthogonalising everything against the constant first, so with ``remove_dc`` the
 constant is always in the model (first, ERR 0: it explains no variance about the mean), y
 and all candidates are centred, and the ERR values of the selected terms sum exactly to the
@@ -177,7 +179,7 @@ def frols(
     keep_basis: bool = False,
     init: Start | None = None,
 ) -> OfrResult:
-    """Select up to ``n_terms`` candidates by largest ERR (seed Eq. 4).
+    """Select up to ``n_terms`` candidates by largest ERR (Eq. 4 of Liu et al. 2005).
 
     ``y`` is the regression target aligned with the projector's rows. With ``remove_dc`` the
     constant (``constant_index``, required) is forced first. ``forced`` candidates are taken

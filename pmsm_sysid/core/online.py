@@ -3,7 +3,7 @@
 The data path of the identifier node, kept free of ROS so it can be tested on plain arrays:
 
 1. :class:`StampAligner` — one sample is the three messages (thrust, speed, position) that
-   carry the same ``header.stamp`` within a tolerance (contract §1; default half a sample
+   carry the same ``header.stamp`` within a tolerance (default half a sample
    period, the period read from the stamps). Samples leave in stamp order with an absolute
    sample index; messages that never complete a sample are counted as *unaligned*, late
    messages as *out of order*, repeated ones as *duplicates*, missing stamps as *gaps*.
@@ -81,7 +81,7 @@ class _Entry:
 
 
 class StampAligner:
-    """Joins per-signal messages into samples by stamp (contract §1), in stamp order.
+    """Joins per-signal messages into samples by stamp, in stamp order.
 
     ``tolerance_ns`` None = half the sample period once the period is known (exact match
     before). ``period_ns`` None = read from the stamps: the median step of the first signal

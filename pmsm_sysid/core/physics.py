@@ -1,4 +1,5 @@
-"""The linear PMSM axis as a sampled simulator (issue 2 item 3; timing of contract §1).
+"""The linear PMSM axis as a sampled simulator (timing: the thrust stamped t_k is held over [t_k,
+t_k+1)).
 
 Mechanical equation, integrated with fixed-step RK4::
 
@@ -351,7 +352,7 @@ def _quantise(value: float, step: float) -> float:
 
 def simulate(plant: Plant, thrust: ArrayLike, seed: int = 0, x0: float = 0.0, v0: float = 0.0,
              t0: float = 0.0) -> Recording:
-    """Run ``thrust`` (one value per sample) through the plant; contract §1 timing.
+    """Run ``thrust`` (one value per sample) through the plant (zero-order hold).
 
     ``speed[k], position[k]`` are measured at ``t[k] = t0 + k/fs``, then ``thrust[k]`` is
     held over [t_k, t_{k+1}), so y(k) depends on u(k-1) and earlier.

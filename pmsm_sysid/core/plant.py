@@ -1,8 +1,8 @@
-"""Plant parameters of the linear PMSM axis and its optional non-ideal effects (contract §4).
+"""Plant parameters of the linear PMSM axis and its optional non-ideal effects.
 
 A plant file is YAML whose keys are the field names below (SI units). The nominal plant is
-the seed's Table 1 with every effect off. Each effect block is a frozen dataclass whose field
-names are the parameter names ``diagnose`` reports (contract §3). Sign conventions: the
+the paper's Table 1 with every effect off. Each effect block is a frozen dataclass whose field
+names are the parameter names ``diagnose`` reports. Sign conventions: the
 mechanical equation is ``M dv/dt = F_applied - B v - F_effects(x, v, F_applied)`` (see
 :func:`pmsm_sysid.core.physics.effects_force`); a block is switched off by leaving it out,
 writing ``null``, or ``enabled: false``.
@@ -130,7 +130,7 @@ class Quantisation:
 
 @dataclass(frozen=True)
 class Plant:
-    """The linear PMSM of the seed's Table 1 (SI units) plus optional effect blocks."""
+    """The linear PMSM of the paper's Table 1 (SI units) plus optional effect blocks."""
 
     mass_kg: float = 2.3213
     viscous_n_per_mps: float = 32.4992
@@ -241,7 +241,7 @@ def _check_plant(p: Plant) -> None:
 
 
 def nominal_plant() -> Plant:
-    """The seed's Table 1 motor with every effect off, sampled at 500 Hz."""
+    """The paper's Table 1 motor with every effect off, sampled at 500 Hz."""
     return Plant()
 
 

@@ -1,7 +1,7 @@
-"""Predictions of a polynomial NARX model: one-step-ahead (seed Eq. 10), model predicted
-output / free run (Eq. 12) and k-step-ahead.
+"""Predictions of a polynomial NARX model: one-step-ahead (Eq. 10 of Liu et al. 2005), model
+predicted output / free run (Eq. 12) and k-step-ahead.
 
-Indexing: ``y[k]`` and ``u[k]`` are the samples stamped k (contract §1: u(k) acts from k to
+Indexing: ``y[k]`` and ``u[k]`` are the samples stamped k (u(k) acts from k to
 k+1, so a model with delay 1 uses u(k-1) for y(k)). With L = ``model.max_lag``, a prediction
 of y(k) needs the samples k-L .. k-1, so the first L outputs of every prediction are not
 predictions: they are NaN in :func:`one_step_ahead` and :func:`k_step_ahead` (and for
@@ -39,7 +39,7 @@ def _inputs(model: NarxModel, *arrays: FloatArray) -> list[FloatArray]:
 
 
 def one_step_ahead(model: NarxModel, y: FloatArray, u: FloatArray) -> FloatArray:
-    """Seed Eq. 10: yhat(k) from measured y(k-i) and u(k-j); NaN for k < L."""
+    """Eq. 10 of Liu et al. (2005): yhat(k) from measured y(k-i) and u(k-j); NaN for k < L."""
     y, u = _inputs(model, y, u)
     return _predict_from(model, lambda lag: _shifted(y, lag), u)
 
@@ -101,7 +101,7 @@ def _compiled(model: NarxModel) -> list[tuple[float, tuple[int, ...], tuple[int,
 def simulate(
     model: NarxModel, u: FloatArray, y_init: FloatArray, limit: float | None = None
 ) -> FreeRun:
-    """Seed Eq. 12: the model fed its own past outputs and the measured input.
+    """Eq. 12 of Liu et al. (2005): the model fed its own past outputs and the measured input.
 
     ``y_init`` holds at least L measured outputs: the first L become yhat[:L]. If |yhat|
     exceeds ``limit`` (default 1e6 * max(1, max|y_init[:L]|)) or is not finite, the run

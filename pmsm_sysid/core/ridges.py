@@ -1,10 +1,11 @@
-"""Peaks of H1, ridges of H2 and H3, and the poles of the linear part (seed §V).
+"""Peaks of H1, ridges of H2 and H3, and the poles of the linear part (Section V of Liu et al.
+2005).
 
 * **H1 peaks**: local maxima of |H1| over [0, 0.5] cycles/sample (the ends count when |H1|
   falls away from them) that stand ``min_prominence_db`` above the surrounding valleys;
   interior maxima are ``resonance``, the ends ``dc`` / ``nyquist``. Each peak carries the
   nearest pole of the linear part (its radius: 1 is the stability limit).
-* **H2 ridges**, classified as the seed does: lines f1 = +-f0 or f2 = +-f0 ("energy
+* **H2 ridges**, classified as the paper does: lines f1 = +-f0 or f2 = +-f0 ("energy
   release": input near f0 is amplified and mixed to other frequencies) and f1 + f2 = +-f0
   ("resonance / energy transfer": pairs of inputs summing to f0 are moved to f0). A line is
   scored by the *median* of 20 log10 |H2| along it (over the whole torus of frequencies), so a
@@ -15,7 +16,7 @@
   ridge of the same order. H2_sym is symmetric, so the
   f2 ridges mirror the f1 ridges; a real model's GFRFs satisfy H(-f) = conj H(f), so every
   ridge at +f0 has its twin at -f0 (both are listed, ``sign`` = +1 / -1).
-* **H3 ridges** on the seed's slice f1 = f3 (Fig. 14): lines f1 = f3 = c ("f1"; named
+* **H3 ridges** on the paper's slice f1 = f3 (Fig. 14): lines f1 = f3 = c ("f1"; named
   "f1+f3" with f0 = 2c when 2c, not c, is an H1 peak), f2 = c ("f2"), f1 + f2 = c ("f1+f2",
   equally f2 + f3) and f1 + f2 + f3 = c ("f1+f2+f3").
 """

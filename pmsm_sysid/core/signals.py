@@ -1,6 +1,6 @@
 """Sampled recordings of one drive axis: thrust in, speed and position out.
 
-Timing convention (contract §1): speed/position stamped t_k are measured at t_k; the thrust
+Timing convention: speed/position stamped t_k are measured at t_k; the thrust
 stamped t_k is applied from t_k to t_{k+1} (zero-order hold), so y(k) depends on u(k-1).
 """
 

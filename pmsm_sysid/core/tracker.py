@@ -4,9 +4,9 @@ For every output (``speed``, ``position``) and window j (samples [a, b), with th
 samples before a feeding the lags, exactly as ``identify --estimate a:b`` does):
 
 1. **Fit** by OFR/iOFR (:func:`.identify.fit_narx`) and validate on the window itself
-   (:func:`.identify.validate_narx`: model predicted output, seed Eq. 12; correlation tests,
-   Eq. 13). The model JSON has the ``identify`` shape (with the input's ``excitation``
-   summary, so the GFRF node can judge which peaks the data support) plus ``window``,
+   (:func:`.identify.validate_narx`: model predicted output, Eq. 12 of Liu et al. (2005);
+   correlation tests, Eq. 13). The model JSON has the ``identify`` shape (with the input's
+   ``excitation`` summary, so the GFRF node can judge which peaks the data support) plus ``window``,
    ``fit_time_ms``, ``model_id``; its ``validation.validation`` is null: independent data
    come later.
 2. **Cross-validate** every earlier model on the first window that starts at or after that
@@ -15,8 +15,8 @@ samples before a feeding the lags, exactly as ``identify --estimate a:b`` does):
    tests (Eq. 13) of the one-step residuals on it, with their 95 % bands. Pass = free-run
    R^2 >= ``min_r2`` on the new window without divergence, and every correlation test passed
    on the model's estimation residuals (the model validity tests as Billings & Voon define
-   them, seed §II.3). The tests on the new window are published beside, as information: a
-   NARX model has no noise model, so coloured process noise shows there first.
+   them, Section II.3 of Liu et al. (2005)). The tests on the new window are published beside, as
+   information: a NARX model has no noise model, so coloured process noise shows there first.
 3. **Change features** (:mod:`.change`), judged for a window that directly follows the
    previous fitted one (when fits cannot keep up and windows are skipped, detection pauses:
    the stream of models it is calibrated on has holes) of an output whose models reproduce
@@ -26,12 +26,13 @@ samples before a feeding the lags, exactly as ``identify --estimate a:b`` does):
    free-run NRMSE on its own window (a window spanning a change fits worse); the
    out-of-sample error of the previous window's model on the ``hop`` newest samples (free
    run over the window, NRMSE of the new samples);
-   the gain and phase of the new model's H1 (seed Eq. 7) at the reference excitation
+   the gain and phase of the new model's H1 (Eq. 7 of Liu et al. 2005) at the reference excitation
    frequency f0 (the strongest input line of the first window after a (re)start; the phase
    relative to its value there, wrapped to (-pi, pi]); the Jaccard distance between
    consecutive term sets; and the harmonic content of the window's output, the energy at
    2..5 x the window's strongest input line relative to the line itself (dB) — what the
-   nonlinear GFRFs H2/H3 transfer to harmonics (seed §V), e.g. when cogging appears.
+   nonlinear GFRFs H2/H3 transfer to harmonics (Section V of Liu et al. 2005), e.g. when cogging
+   appears.
 """
 
 from __future__ import annotations
@@ -329,7 +330,7 @@ def dominant_frequency(u: FloatArray) -> float:
 
 
 def h1_features(model: NarxModel, f_norm: float) -> dict[str, float]:
-    """Gain (dB) and phase (rad) of the model's H1 (seed Eq. 7) at ``f_norm``."""
+    """Gain (dB) and phase (rad) of the model's H1 (Eq. 7 of Liu et al. 2005) at ``f_norm``."""
     try:
         h = complex(Gfrf.from_model(model).h1(np.array([f_norm]))[0])
     except PmsmSysidError:

@@ -1,10 +1,11 @@
-"""Model validation (seed §II.3): fit metrics, the correlation tests of Eq. 13, Welch PSD.
+"""Model validation (Section II.3 of Liu et al. 2005): fit metrics, the correlation tests of Eq.
+13, Welch PSD.
 
 Fit metrics, for measured y and prediction yhat over the same samples:
 NMSE = sum (y - yhat)^2 / sum (y - ybar)^2, NRMSE = sqrt(NMSE), R^2 = 1 - NMSE.
 
-Correlation tests (Billings & Voon 1986; seed Eq. 13). With a prime meaning the mean removed
-and phi_ab(tau) = sum_k a(k) b(k + tau) / sqrt(sum a^2 sum b^2) over the overlap:
+Correlation tests (Billings & Voon 1986; Eq. 13 of Liu et al. (2005)). With a prime meaning the
+mean removed and phi_ab(tau) = sum_k a(k) b(k + tau) / sqrt(sum a^2 sum b^2) over the overlap:
 
 =======  =====================================  =====================
 ``ee``   phi_e'e'(tau) = delta(tau)             tau = 1..L (tau=0 is 1)
@@ -109,7 +110,7 @@ class CorrelationTest:
 
 @dataclass(frozen=True)
 class CorrelationTests:
-    """The five tests of seed Eq. 13."""
+    """The five tests of Eq. 13 of Liu et al. (2005)."""
 
     ee: CorrelationTest
     ue: CorrelationTest
@@ -125,7 +126,7 @@ class CorrelationTests:
         return (self.ee, self.ue, self.u2e, self.u2e2, self.e_eu)
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
-        """Contract shape: {"ee": {"max_abs", "band", "pass", ...}, "ue": ..., ...}."""
+        """Shape: {"ee": {"max_abs", "band", "pass", ...}, "ue": ..., ...}."""
         return {t.name: t.to_dict() for t in self.tests()}
 
 
@@ -203,7 +204,7 @@ def _judge(
 
 
 def correlation_tests(residuals: FloatArray, u: FloatArray, max_lag: int = 20) -> CorrelationTests:
-    """The five Billings-Voon tests of seed Eq. 13 on residuals e(k) and input u(k).
+    """The five Billings-Voon tests of Eq. 13 of Liu et al. (2005) on residuals e(k) and input u(k).
 
     ``residuals`` and ``u`` are aligned sample by sample (u(k) is the input stamped at k).
     """

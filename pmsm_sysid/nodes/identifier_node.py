@@ -1,6 +1,6 @@
-"""IdentifierNode: online NARX identification on the live topics (issue 5).
+"""IdentifierNode: online NARX identification on the live topics.
 
-Subscribes to ``<ns>/thrust|speed|position`` (contract §1) or, with ``input_layout:
+Subscribes to ``<ns>/thrust|speed|position`` or, with ``input_layout:
 joint_state``, to one ``sensor_msgs/JointState`` topic (``effort``/``velocity``/``position`` of
 ``joint_name``). The work is done by :class:`pmsm_sysid.core.engine.OnlineEngine` (alignment,
 window ring, fitting thread) around :class:`pmsm_sysid.core.tracker.WindowTracker` (fits,

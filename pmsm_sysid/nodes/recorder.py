@@ -1,6 +1,6 @@
 """RecorderNode: subscribes with ``raw=True`` and stores the CDR bytes through a BagRecorder.
 
-- Topics: by default the contract inputs under the namespace plus the identification outputs
+- Topics: by default the standard inputs under the namespace plus the identification outputs
   (``/pmsm_sysid/*``); with ``topics`` exactly those. Topics of known type are subscribed at
   once (nothing published after the recorder starts is missed); others when they show up in
   the ROS graph, with the type and reliability their publishers offer.
@@ -45,7 +45,7 @@ OUTPUT_TYPES = {
 
 
 def known_type(topic: str) -> str | None:
-    """The contract type of ``topic`` when its name fixes it (inputs, outputs), else None."""
+    """The standard type of ``topic`` when its name fixes it (inputs, outputs), else None."""
     if topic in OUTPUT_TYPES:
         return OUTPUT_TYPES[topic]
     return INPUT_TYPES.get(topic.rsplit("/", 1)[-1])

@@ -55,12 +55,12 @@ def publishable(topics: dict[str, str]) -> tuple[dict[str, str], dict[str, str]]
 
 
 def is_input(topic: str, msgtype: str) -> bool:
-    """True for ``<ns>/thrust|speed|position`` carrying the contract's type."""
+    """True for ``<ns>/thrust|speed|position`` carrying the standard type."""
     return INPUT_TYPES.get(topic.rsplit("/", 1)[-1]) == msgtype
 
 
 def input_prefix(topics: dict[str, str]) -> str | None:
-    """The namespace of the contract's input topics in a bag (``/pmsm``), None if absent."""
+    """The namespace of the standard input topics in a bag (``/pmsm``), None if absent."""
     prefixes = {t.rsplit("/", 1)[0] for t, ty in topics.items() if is_input(t, ty)}
     if len(prefixes) > 1:
         raise BagError(f"several input namespaces in the bag ({', '.join(sorted(prefixes))})")

@@ -1,4 +1,4 @@
-"""MotorSimNode: the simulated linear PMSM on ROS 2 (issue 2 item 5, contract §1).
+"""MotorSimNode: the simulated linear PMSM on ROS 2.
 
 Per sample k (exactly the order of :func:`pmsm_sysid.core.physics.simulate`, so the numbers
 equal the offline simulation of the same plant and seed bit for bit):
@@ -20,7 +20,7 @@ in step (more per round outruns it and its keep-last queue overflows).
 :meth:`MotorSimNode.step` publishes n samples at once (for tests and tools that pace
 themselves).
 
-Parameters mirror the plant file (contract §4): the plant's scalars by name, each effect
+Parameters mirror the plant file: the plant's scalars by name, each effect
 block as ``<effect>.enabled`` plus ``<effect>.<key>`` (``cogging.harmonics`` is a YAML/JSON
 list), and ``excitation``, ``amplitude_n``, ``seed``, ``namespace``, ``clock``, ``rate``,
 ``burst``, ``max_samples``, ``frame_id``. A change at run time rebuilds the plant (validated:

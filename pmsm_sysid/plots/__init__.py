@@ -1,4 +1,4 @@
-"""Figures in the seed paper's style (matplotlib, Agg, no pyplot state).
+"""Figures in the paper's style (matplotlib, Agg, no pyplot state).
 
 Every function builds one :class:`~.base.Plot`: the matplotlib ``Figure``, a file stem, a
 caption, and ``data`` -- what was actually drawn, read back from the figure's artists (band
@@ -6,7 +6,7 @@ lines, ridge lines, curves), so a test can check that a figure is right, not jus
 The numerical core never imports this package; these functions take arrays and results.
 
 =========================  ======================================  ==================
-function                   shows                                   seed figures
+function                   shows                                   Liu et al. (2005)
 =========================  ======================================  ==================
 ``io_series``              input and output of a window            Figs. 2, 7
 ``psd_pair``               Welch PSD of input and output           Figs. 3, 8

@@ -1,4 +1,5 @@
-"""The five model validity tests of seed Eq. 13 with their 95% bands (Figs. 6, 11)."""
+"""The five model validity tests of Eq. 13 of Liu et al. (2005) with their 95% bands (Figs. 6,
+11)."""
 
 from __future__ import annotations
 
@@ -63,7 +64,8 @@ def correlation_tests(tests: CorrelationTests, n_samples: int, window: str = "es
     note.text(0.02, 0.9, f"N = {n_samples} residuals ({window} window)\n"
               f"95% band ±1.96/√N = ±{band:.4f}\n{verdict}",
               va="top", ha="left", transform=note.transAxes, fontsize=9)
-    caption = (f"Model validity tests (seed Eq. 13) on the one-step-ahead residuals of the "
+    caption = (f"Model validity tests (Eq. 13 of Liu et al. 2005) on the one-step-ahead "
+               f"residuals of the "
                f"{window} window, N = {n_samples}; dashed: the 95% band ±1.96/√N = "
-               f"±{band:.4f}; {verdict} (seed Figs. 6, 11).")
+               f"±{band:.4f}; {verdict} (Figs. 6, 11 of Liu et al. 2005).")
     return Plot(fig, name, caption, data)

@@ -1,11 +1,11 @@
-"""Frequency-domain figures of an identified model (seed §V): H1 gain and phase (Figs. 12,
-15), |H2| as contour and surface (Figs. 13, 16) and |H3| on the slice f1 = f3 (Figs. 14,
-17), with the ridges of the gfrf JSON drawn as lines on the (f1, f2) plane.
+"""Frequency-domain figures of an identified model (Section V of Liu et al. 2005): H1 gain and
+phase (Figs. 12, 15), |H2| as contour and surface (Figs. 13, 16) and |H3| on the slice f1 = f3
+(Figs. 14, 17), with the ridges of the gfrf JSON drawn as lines on the (f1, f2) plane.
 
 A ridge ``{"kind", "sign", "freq_norm"}`` is the line a*x + b*y = sign*freq_norm with (a, b)
 from :data:`RIDGE_LINES`: on H2's plane x = f1, y = f2; on H3's slice x = f1 = f3, y = f2
 (so ``f1+f3`` is 2x = f0 and ``f1+f2+f3`` is 2x + y = f0). Frequencies are normalised
-(cycles/sample) as in the seed; a top axis gives Hz.
+(cycles/sample) as in the paper; a top axis gives Hz.
 """
 
 from __future__ import annotations
@@ -97,9 +97,10 @@ def _draw_ridges(ax: Any, ridges: Sequence[Mapping[str, Any]], fmax: float,
 def h1_gain_phase(f_norm: ArrayLike, h1: ArrayLike, sample_rate_hz: float,
                   peaks: Sequence[Mapping[str, Any]] = (), title: str = "",
                   name: str = "h1", phase: bool = True,
-                  excited: tuple[float, float] | None = None) -> Plot:
+                  excited: Sequence[tuple[float, float]] | None = None) -> Plot:
     """Gain (dB) and phase (deg) of H1 over [0, 0.5] cycles/sample, peaks marked
-    (``phase=False``: gain only, for magnitudes without phase).
+    (``phase=False``: gain only, for magnitudes without phase). ``excited``: the intervals
+    (cycles/sample) where the estimation input has power, shaded.
 
     ``data``: ``f_norm``, ``gain_db``, ``phase_deg`` (empty without phase) and ``peaks``
     [(freq_norm, gain_db)] as drawn.
@@ -112,11 +113,11 @@ def h1_gain_phase(f_norm: ArrayLike, h1: ArrayLike, sample_rate_hz: float,
     else:
         ax_g, ax_p = fig.subplots(), None
     (lg,) = ax_g.plot(f, 20 * np.log10(np.maximum(np.abs(h), 1e-300)), color="k")
-    if excited is not None:
+    for i, (lo, hi) in enumerate(excited or ()):
         for ax in (ax_g, ax_p):
             if ax is not None:
-                ax.axvspan(excited[0], excited[1], color="tab:green", alpha=0.25, lw=0,
-                           label="excited band" if ax is ax_g else None)
+                ax.axvspan(lo, hi, color="tab:green", alpha=0.25, lw=0,
+                           label="input has power" if ax is ax_g and i == 0 else None)
     phase_deg = np.zeros(0)
     if ax_p is not None:
         (lp,) = ax_p.plot(f, np.degrees(np.angle(h)), color="k")
@@ -128,7 +129,7 @@ def h1_gain_phase(f_norm: ArrayLike, h1: ArrayLike, sample_rate_hz: float,
         ax_g.set_xlabel("normalised frequency (cycles/sample)")
     pk = [(float(p["freq_norm"]), float(p["gain_db"])) for p in peaks]
     marks = _mark_peaks(ax_g, pk)
-    if pk or excited is not None:
+    if pk or excited:
         ax_g.legend(loc="upper right")
     ax_g.set_ylabel("gain (dB)")
     ax_g.set_title(title or "first-order GFRF H1(f)")
@@ -151,15 +152,16 @@ def _mark_peaks(ax: Any, pk: list[tuple[float, float]]) -> list[tuple[float, flo
 
 
 def _h1_caption(pk: list[tuple[float, float]], fs: float, phase: bool,
-                excited: tuple[float, float] | None) -> str:
+                excited: Sequence[tuple[float, float]] | None) -> str:
     top = max(pk, key=lambda p: p[1]) if pk else None
     where = (f"; largest peak {top[1]:.1f} dB at {top[0]:.4f} cycles/sample = "
              f"{top[0] * fs:.2f} Hz" if top else "")
-    band = (f"; shaded: the band the estimation input excited, {excited[0]:.4f}-"
-            f"{excited[1]:.4f} cycles/sample (outside it H1 is extrapolated)"
-            if excited is not None else "")
+    spans = ", ".join(f"{lo:.4f}-{hi:.4f} ({lo * fs:.1f}-{hi * fs:.1f} Hz)"
+                      for lo, hi in excited or ())
+    band = (f"; shaded: where the estimation input has power, {spans} cycles/sample "
+            "(elsewhere H1 is extrapolated)" if spans else "")
     return (f"First-order GFRF H1: gain{' and phase' if phase else ''}{where}{band} "
-            "(seed Figs. 12, 15).")
+            "(Figs. 12, 15 of Liu et al. 2005).")
 
 
 def _ridge_caption(drawn: Sequence[Mapping[str, Any]], fs: float) -> str:
@@ -203,7 +205,7 @@ def h2_contour(f: ArrayLike, h2: ArrayLike, sample_rate_hz: float,
     what = "H3 on the slice f1 = f3" if order == 3 else "H2"
     caption = (f"Contour of |{what}| in dB over ±{fmax:g} cycles/sample "
                f"(±{fmax * sample_rate_hz:g} Hz); {_ridge_caption(drawn, sample_rate_hz)} "
-               f"(seed {figs}).")
+               f"(Liu et al. 2005, {figs}).")
     return Plot(fig, name, caption, {"f": ff, "db": db, "fmax": fmax, "ridges": drawn})
 
 
@@ -235,7 +237,7 @@ def h2_surface(f: ArrayLike, h2: ArrayLike, sample_rate_hz: float,
     ax.view_init(elev=35, azim=-60)
     caption = (f"Surface of |H2| in dB over ±{ff[-1]:g} cycles/sample with the detected "
                f"ridges drawn on it; {_ridge_caption(drawn, sample_rate_hz)} "
-               "(seed Figs. 13(a), 16).")
+               "(Figs. 13(a), 16 of Liu et al. 2005).")
     return Plot(fig, name, caption, {"f": fs_, "db": db, "ridges": drawn})
 
 

@@ -1,4 +1,4 @@
-"""Time-domain and spectral figures: input/output series (seed Figs. 2, 7), Welch PSDs
+"""Time-domain and spectral figures: input/output series (Figs. 2, 7 of Liu et al. 2005), Welch PSDs
 (Figs. 3, 8) and the model predicted output against the measurements (Figs. 4/9, 5/10)."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ UNITS = {"thrust": "N", "speed": "m/s", "position": "m"}
 
 
 def label(name: str) -> str:
-    """Axis label with the SI unit of a contract signal (``speed`` -> ``speed (m/s)``)."""
+    """Axis label with the SI unit of a recorded signal (``speed`` -> ``speed (m/s)``)."""
     unit = UNITS.get(name)
     return f"{name} ({unit})" if unit else name
 
@@ -29,7 +29,7 @@ def _line_data(line: Any) -> tuple[FloatArray, FloatArray]:
 def io_series(k: ArrayLike, u: ArrayLike, y: ArrayLike, input_name: str = "thrust",
               output_name: str = "speed", window: str = "estimation",
               name: str = "io_series") -> Plot:
-    """Input (a) and output (b) over sample index k (seed Figs. 2, 7).
+    """Input (a) and output (b) over sample index k (Figs. 2, 7 of Liu et al. 2005).
 
     ``data``: ``k``, ``u``, ``y`` as drawn.
     """
@@ -45,7 +45,7 @@ def io_series(k: ArrayLike, u: ArrayLike, y: ArrayLike, input_name: str = "thrus
     kk, uu = _line_data(lu)
     _, yy = _line_data(ly)
     caption = (f"Input ({input_name}) and output ({output_name}) of the {window} window, "
-               f"samples {int(kk[0])}-{int(kk[-1])} (seed Figs. 2, 7).")
+               f"samples {int(kk[0])}-{int(kk[-1])} (Figs. 2, 7 of Liu et al. 2005).")
     return Plot(fig, name, caption, {"k": kk, "u": uu, "y": yy})
 
 
@@ -53,7 +53,8 @@ def io_series(k: ArrayLike, u: ArrayLike, y: ArrayLike, input_name: str = "thrus
 def psd_pair(f_norm: ArrayLike, psd_u: ArrayLike, psd_y: ArrayLike, sample_rate_hz: float,
              input_name: str = "thrust", output_name: str = "speed",
              name: str = "psd") -> Plot:
-    """Welch PSD of input (a) and output (b) over normalised frequency (seed Figs. 3, 8).
+    """Welch PSD of input (a) and output (b) over normalised frequency (Figs. 3, 8 of Liu et al.
+    2005).
 
     ``data``: ``f_norm``, ``psd_u``, ``psd_y`` as drawn and each curve's peak frequency
     ``peak_u_norm`` / ``peak_y_norm`` (cycles/sample), read from the drawn lines.
@@ -77,7 +78,7 @@ def psd_pair(f_norm: ArrayLike, psd_u: ArrayLike, psd_y: ArrayLike, sample_rate_
                f"output {output_name}; peaks at {out['peak_u_norm']:.4f} and "
                f"{out['peak_y_norm']:.4f} cycles/sample = "
                f"{out['peak_u_norm'] * sample_rate_hz:.2f} and "
-               f"{out['peak_y_norm'] * sample_rate_hz:.2f} Hz (seed Figs. 3, 8).")
+               f"{out['peak_y_norm'] * sample_rate_hz:.2f} Hz (Figs. 3, 8 of Liu et al. 2005).")
     return Plot(fig, name, caption, out)
 
 
@@ -94,8 +95,8 @@ def nmse(y: FloatArray, yhat: FloatArray) -> float:
 def predicted_vs_measured(k: ArrayLike, y: ArrayLike, yhat: ArrayLike,
                           output_name: str = "speed", window: str = "estimation",
                           name: str = "predicted") -> Plot:
-    """Measured output (solid) and the model predicted output (seed Eq. 12; dotted on the
-    estimation window, asterisks on validation as in Figs. 4 and 5), error below.
+    """Measured output (solid) and the model predicted output (Eq. 12 of Liu et al. 2005; dotted on
+    the estimation window, asterisks on validation as in Figs. 4 and 5), error below.
 
     ``data``: ``k``, ``measured``, ``predicted`` as drawn and their ``nmse``.
     """
@@ -121,5 +122,5 @@ def predicted_vs_measured(k: ArrayLike, y: ArrayLike, yhat: ArrayLike,
     fig_no = "Figs. 4, 9" if window == "estimation" else "Figs. 5, 10"
     caption = (f"Model predicted output (Eq. 12: the model fed its own past outputs) against "
                f"the measured {output_name} on the {window} window, samples "
-               f"{int(kk[0])}-{int(kk[-1])}; {state} (seed {fig_no}).")
+               f"{int(kk[0])}-{int(kk[-1])}; {state} (Liu et al. 2005, {fig_no}).")
     return Plot(fig, name, caption, {"k": kk, "measured": ym, "predicted": yp, "nmse": score})

@@ -1,5 +1,5 @@
-"""Report sections in the frequency domain (seed §V): H1, H2 and H3 with the peaks and
-ridges of the gfrf JSON (the same analysis as ``pmsm-sysid gfrf``)."""
+"""Report sections in the frequency domain (Section V of Liu et al. 2005): H1, H2 and H3 with the
+peaks and ridges of the gfrf JSON (the same analysis as ``pmsm-sysid gfrf``)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from .. import plots
+from ..core.errors import PmsmSysidError
 from ..core.gfrf import Gfrf
 from ..core.model import NarxModel
 from .html import Block, Facts, Note, Section, Table
@@ -54,12 +55,24 @@ def _view(g: Mapping[str, Any], model_json: Mapping[str, Any] | None) -> float:
     return plots.view_fmax(freqs)
 
 
-def _excited(model_json: Mapping[str, Any] | None) -> tuple[float, float] | None:
-    """The estimation input's excited band (cycles/sample), when the JSON carries it."""
-    band = ((model_json or {}).get("excitation") or {}).get("band_norm")
-    if not band or len(band) != 2:
+def _excited(model_json: Mapping[str, Any] | None) -> list[tuple[float, float]] | None:
+    """Where the estimation input has power (cycles/sample), when the JSON says: a narrow
+    band around each tone of a tonal input (the stretch between tones holds no power), the
+    band of most of the input's power otherwise."""
+    from ..core.identifiability import ExcitationSummary, tone_tolerance_hz
+
+    ex = (model_json or {}).get("excitation")
+    if not ex:
         return None
-    return float(band[0]), float(band[1])
+    try:
+        s = ExcitationSummary.from_dict(ex)
+    except PmsmSysidError:
+        return None
+    fs = s.sample_rate_hz
+    if s.tonal and s.tones_hz:
+        return [(max(t - tone_tolerance_hz(s, t), 0.0) / fs,
+                 min(t + tone_tolerance_hz(s, t), fs / 2) / fs) for t in s.tones_hz]
+    return [s.band_norm]
 
 
 def gfrf_facts(g: Mapping[str, Any]) -> Facts:
@@ -101,7 +114,8 @@ def model_sections(model: NarxModel, g: Mapping[str, Any], sink: Sink,
         sink.figure(plots.h3_slice(f3, h3, fs, g["h3"]["ridges"],
                                    f"|H3(f1, f2, f1)|, {title}")),
     ]
-    return [Section("Frequency domain: GFRFs (seed Figs. 12-17)", tuple(blocks + tables(g)))]
+    return [Section("Frequency domain: GFRFs (Figs. 12-17 of Liu et al. 2005)",
+                    tuple(blocks + tables(g)))]
 
 
 def _grid_arrays(grid: Mapping[str, Any], key: str) -> np.ndarray:
@@ -126,5 +140,6 @@ def json_sections(g: Mapping[str, Any], sink: Sink) -> list[Section]:
         blocks.append(Note("no GFRF figures: this gfrf JSON has no 'grid' (write it with "
                            "'pmsm-sysid gfrf MODEL --grid 256 --json FILE', or report the "
                            "identify JSON instead)"))
-    return [Section("Frequency domain: GFRFs (seed Figs. 12-17)", tuple(blocks + tables(g)))]
+    return [Section("Frequency domain: GFRFs (Figs. 12-17 of Liu et al. 2005)",
+                    tuple(blocks + tables(g)))]
 

@@ -1,10 +1,12 @@
-"""Report sections of one identification: signals, model, validation (seed §§III-IV).
+"""Report sections of one identification: signals, model, validation (Sections III-IV of Liu et al.
+(2005)).
 
-The identify JSON (contract §3) says which windows and model; the recording gives the
+The identify JSON says which windows and model; the recording gives the
 series. Predictions and tests are recomputed here exactly as ``identify`` computes them
 (:func:`pmsm_sysid.core.identify.validate_narx`): each window is preceded by the structure's
 max lag of samples when the recording has them; the model's max lag L of samples start the
-free run (seed Eq. 12) and the one-step-ahead residuals of rows L.. feed the tests (Eq. 13).
+free run (Eq. 12 of Liu et al. 2005) and the one-step-ahead residuals of rows L.. feed the tests
+(Eq. 13).
 """
 
 from __future__ import annotations
@@ -68,12 +70,12 @@ def _num(x: Any, fmt: str = ".4g") -> str:
 
 
 def term_table(d: Mapping[str, Any]) -> Table:
-    """Seed Tables 2 and 3: term, estimate, standard deviation, ERR."""
+    """Tables 2 and 3 of Liu et al. (2005): term, estimate, standard deviation, ERR."""
     rows = tuple((str(t["name"]), _num(t["estimate"], ".5e"), _num(t.get("std"), ".4e"),
                   _num(t.get("err"), ".6f")) for t in d["terms"])
     total = sum(float(t.get("err") or 0.0) for t in d["terms"])
     return Table(f"Identified model {d.get('input', 'u')} → {d.get('output', 'y')}: "
-                 f"{len(rows)} terms, sum of ERR {total:.6f} (as seed Tables 2, 3)",
+                 f"{len(rows)} terms, sum of ERR {total:.6f} (as Tables 2, 3 of Liu et al. 2005)",
                  ("Model term", "Estimate", "Std. dev.", "ERR"), rows)
 
 
@@ -87,15 +89,16 @@ def fit_table(d: Mapping[str, Any]) -> Table:
             where = f"{rng[0]}:{rng[1]}" if rng else ""
             rows.append((name, where, _num(m.get("nmse")), _num(m.get("r2")),
                          _num(m.get("osa_r2"))))
-    return Table("Fit on each window (model predicted output, seed Eq. 12; one-step-ahead "
-                 "Eq. 10)", ("window", "samples", "NMSE", "R²", "one-step R²"), tuple(rows))
+    return Table("Fit on each window (model predicted output, Eq. 12 of Liu et al. 2005; "
+                 "one-step-ahead Eq. 10)", ("window", "samples", "NMSE", "R²", "one-step R²"),
+                 tuple(rows))
 
 
 def correlation_table(tests: Mapping[str, Mapping[str, Any]]) -> Table:
     rows = tuple((name, _num(t.get("max_abs")), _num(t.get("band")),
                   f"{t.get('n_outside', 'n/a')}/{t.get('n_lags', 'n/a')}",
                   "pass" if t.get("pass") else "FAIL") for name, t in tests.items())
-    return Table("Correlation tests (seed Eq. 13)",
+    return Table("Correlation tests (Eq. 13 of Liu et al. 2005)",
                  ("test", "max |φ|", "95% band", "lags outside", "verdict"), rows)
 
 
@@ -146,8 +149,9 @@ def series_sections(d: Mapping[str, Any], model: NarxModel, rec: Recording,
     tests: CorrelationTests = correlation_tests(est.residuals, est.u_rows, _corr_lags(d))
     val_blocks.append(sink.figure(plots.correlation_tests(tests, len(est.residuals))))
     val_blocks.append(correlation_table(tests.to_dict()))
-    return [Section("Recording: input and output (seed Figs. 2, 3, 7, 8)", tuple(signals)),
-            Section("Validation (seed Figs. 4-6, 9-11)", tuple(val_blocks))]
+    return [Section("Recording: input and output (Figs. 2, 3, 7, 8 of Liu et al. 2005)",
+                    tuple(signals)),
+            Section("Validation (Figs. 4-6, 9-11 of Liu et al. 2005)", tuple(val_blocks))]
 
 
 def json_only_sections(d: Mapping[str, Any], why: str) -> list[Section]:
@@ -163,4 +167,4 @@ def model_section(d: Mapping[str, Any]) -> Section:
     blocks: list[Block] = [model_facts(d), term_table(d)]
     for w in (d.get("data_check") or {}).get("warnings", []):
         blocks.append(Note(str(w)))
-    return Section("Identified NARX model (seed Tables 2, 3)", tuple(blocks))
+    return Section("Identified NARX model (Tables 2, 3 of Liu et al. 2005)", tuple(blocks))

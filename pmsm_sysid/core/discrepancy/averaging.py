@@ -1,6 +1,6 @@
 """Interval means: what the velocity increment of one sample interval integrates.
 
-Under zero-order hold (contract §1) the thrust is constant over [t_k, t_k+1) but the force
+Under zero-order hold the thrust is constant over [t_k, t_k+1) but the force
 the mover feels is not: a lag or delay reshapes the command, and the position- and
 speed-dependent effects change as the mover travels. The equation error compares interval
 means, so every regressor here is the mean of its force over the interval, computed in

@@ -3,14 +3,14 @@
 1. **Locate** -- the equation-error residual of the nominal plant (:mod:`.kinematics`) is
    described over time, position, velocity and frequency (:mod:`.locate`), and the library's
    candidates are ranked by ERR on it (the position periodogram is the cogging scan).
-2. **Name** -- forward regression over the library (:mod:`.select`): ERR ranking (seed
-   Eq. 4), prewhitened F-tests with a Bonferroni correction for every candidate and pitch
-   searched, and a floor on the share of the mismatch explained.
+2. **Name** -- forward regression over the library (:mod:`.select`): ERR ranking (Eq. 4
+   of Liu et al. 2005), prewhitened F-tests with a Bonferroni correction for every candidate and
+   pitch searched, and a floor on the share of the mismatch explained.
 3. **Model** -- nonlinear refinement, look-alike disambiguation and held-out confirmation
    (:mod:`.modelling`); the confirmed effects become the corrected plant.
 4. **Show** -- NRMSE of the force (equation error) and of a short-horizon speed replay
    (output error, :mod:`.resim`) before/after, on estimation and held-out data, and the
-   correlation tests (seed Eq. 13) of the prewhitened residual before/after.
+   correlation tests (Eq. 13 of Liu et al. 2005) of the prewhitened residual before/after.
 
 Over frequency the GFRFs of a NARX fitted to the real data and to a noisy simulated twin
 are compared too (:mod:`.gfrf_compare`): the H2 ridges and H1 peaks only the real data's

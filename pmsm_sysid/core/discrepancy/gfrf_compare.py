@@ -1,7 +1,8 @@
 """Locate over frequency with GFRFs: which ridges exist in the real data's model only?
 
-The same modest NARX structure (``ny = nu = 10``, degree 2, delay 1; terms by OFR (seed
-Eq. 4) with the model size by BIC, at most 20) is fitted, speed from thrust, to the central
+The same modest NARX structure (``ny = nu = 10``, degree 2, delay 1; terms by OFR (Eq. 4
+of Liu et al. 2005) with the model size by BIC, at most 20) is fitted, speed from thrust, to the
+central
 ``MAX_SAMPLES`` of the estimation data and to a **noisy simulated twin**: the plant (its noise
 blocks off) driven by the recorded thrust from the measured state at the start of the
 window, plus white speed noise scaled so that the twin's one-step-ahead residual matches
@@ -9,11 +10,11 @@ the real model's (one refit if the first draw is off by more than 10 %). A noise
 would give a model whose GFRF ridges are numerical dust (−350 dB); with matched noise the
 twin shows what the plant and the noise alone put into such a model.
 
-Each model's GFRFs (seed Eqs. 7-9) are analysed by :func:`~pmsm_sysid.core.gfrf_analysis.
-analyse` (H1 peaks, H2 ridges, each judged ``supported`` by the estimation input or not).
-An H1 peak counts when it is supported and the measured speed stands ``SNR_MIN_DB`` above
-the model's one-step residual at its frequency (where the speed is all noise, as at high
-frequencies under a position loop, a noise-fitted linear part has peaks anywhere). An H2
+Each model's GFRFs (Eqs. 7-9 of Liu et al. 2005) are analysed by
+:func:`~pmsm_sysid.core.gfrf_analysis. analyse` (H1 peaks, H2 ridges, each judged ``supported`` by
+the estimation input or not). An H1 peak counts when it is supported and the measured speed stands
+``SNR_MIN_DB`` above the model's one-step residual at its frequency (where the speed is all noise,
+as at high frequencies under a position loop, a noise-fitted linear part has peaks anywhere). An H2
 ridge counts when it is supported and the model's nonlinear terms are **significant**: a
 prewhitened nested F-test of the nonlinear terms against the model's linear terms,
 Bonferroni-corrected for every subset of that many nonlinear candidates and every model

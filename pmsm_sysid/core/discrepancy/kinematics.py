@@ -5,7 +5,7 @@ The nominal plant says ``F_eff = M a + B v + F_effects(x, v, F_eff)`` (the sign 
 exactly the force of whatever the plant leaves out. It needs the acceleration, which is the
 reason for the care below (the IDIM-LS practice of the EMPS benchmark):
 
-* **Timing (contract §1).** The thrust stamped t_k is held over [t_k, t_{k+1}). With a measured
+* **Timing.** The thrust stamped t_k is held over [t_k, t_{k+1}). With a measured
   speed, interval k pairs ``F(k)`` with ``a_k = (v_{k+1} - v_k)/T`` and ``v̄_k`` -- for the
   rigid mass-damper the inversion ``F(k) = c1 v_{k+1} - c0 v_k`` is exact under zero-order
   hold. With position only (speed derived, as in EMPS), sample j pairs the central second

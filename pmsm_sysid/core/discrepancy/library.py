@@ -1,4 +1,4 @@
-"""The library of interpretable effects, with the contract's names (contract §3).
+"""The library of interpretable effects, with the names diagnose reports.
 
 Each effect is a force the nominal plant leaves out, written in the inverse-dynamics sign
 ``F = M a + B v + F_effects`` of :mod:`pmsm_sysid.core.physics`, so a regressor's coefficient

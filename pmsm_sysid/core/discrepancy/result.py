@@ -1,6 +1,6 @@
 """The diagnosis result: found effects, where the mismatch lives, fits before/after.
 
-``DiagnoseResult.to_dict()`` is the contract's ``diagnose`` JSON (§3) plus extra keys
+``DiagnoseResult.to_dict()`` is the ``diagnose`` JSON plus extra keys
 (``params_std``, ``held_out``, ``confidence``, ``method`` ...); ``summary()`` is the
 human report the CLI prints.
 """
@@ -69,7 +69,7 @@ class Curves:
 
 @dataclass(frozen=True)
 class DiagnoseResult:
-    """Everything ``diagnose`` found; ``to_dict`` is the contract JSON."""
+    """Everything ``diagnose`` found; ``to_dict`` is the JSON."""
 
     plant: Plant
     corrected: Plant
@@ -113,7 +113,8 @@ class DiagnoseResult:
         tests = (self.fit.get("estimation") or {}).get("correlation_tests")
         if tests:
             fails = {k: [n for n, t in v.items() if not t["pass"]] for k, v in tests.items()}
-            lines.append("correlation tests (seed Eq. 13, prewhitened residual) failing: "
+            lines.append("correlation tests (Eq. 13 of Liu et al. 2005, prewhitened "
+                         "residual) failing: "
                          f"before {', '.join(fails['before']) or 'none'}; "
                          f"after {', '.join(fails['after']) or 'none'}")
         strong = [w for w in self.where if w.significance >= 3.0]

@@ -1,8 +1,8 @@
 """Concealed-effect recordings: known plants whose missing physics hides in the data.
 
-Each scenario is the nominal motor of the seed's Table 1 plus one or two effects, realistic
+Each scenario is the nominal motor of the paper's Table 1 plus one or two effects, realistic
 noise (speed 2 mm/s, position 5 um, process force 1 N, 1 um encoder steps) and a drive that
-hides the effect: open loop with the seed's excitations, or under a PID position loop whose
+hides the effect: open loop with the paper's excitations, or under a PID position loop whose
 thrust is recorded (as on the EMPS rig). ``scripts/make_concealed_bags.sh`` writes them to
 ``bags/concealed_*`` with their true plants in ``plants/concealed_*.yaml``; the tests
 regenerate them in memory with other seeds. ``TRUTH`` lists what ``diagnose`` must find

@@ -1,4 +1,5 @@
-"""Forward regression over the effect library, ranked by ERR (seed Eq. 4), with significance.
+"""Forward regression over the effect library, ranked by ERR (Eq. 4 of Liu et al. 2005), with
+significance.
 
 At each step every candidate group (one effect: one column, or a sin/cos pair per harmonic)
 is orthogonalised against the effects chosen so far and scored by its error reduction ratio

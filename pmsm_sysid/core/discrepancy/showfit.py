@@ -5,9 +5,10 @@
   (its share and significance are the larger of the bins' and the period's).
 * ``scan_unexplained``: the same scan on the final model's residual; an axis that still
   explains a significant share becomes an ``unexplained`` entry saying where it lives.
-* ``fit_table``: force (equation-error) NRMSE before/after, the Billings-Voon tests (seed
-  Eq. 13) on the residual prewhitened by the final model's AR filter (the same filter before
-  and after, so only the model changes), and the short-horizon speed replay (output error,
+* ``fit_table``: force (equation-error) NRMSE before/after, the Billings-Voon tests (Eq.
+  13 of Liu et al. 2005) on the residual prewhitened by the final model's AR filter (the same
+  filter before and after, so only the model changes), and the short-horizon speed replay (output
+  error,
   :mod:`.resim`: horizon chosen so that position-periodic forces are evaluated where they
   act, and a verdict -- ``replay_notes`` says so where the replay cannot see the
   correction).
@@ -86,7 +87,7 @@ def _segment_fit(fit: Fit, d: EquationData) -> dict[str, Any]:
 
 def fit_table(plant: Plant, corrected: Plant, fit: Fit, segs: Any,
               do_replay: bool) -> tuple[dict[str, Any], dict[str, dict[str, FloatArray]]]:
-    """The contract's ``fit`` block (plus tests and output error) and replay series.
+    """The diagnose JSON's ``fit`` block (plus tests and output error) and replay series.
 
     The replay horizon is chosen once, on the estimation recording (:func:`.resim.
     choose_horizon`), and kept for the held-out data so both rows measure the same thing.

@@ -1,4 +1,5 @@
-"""Fitted coefficients to the contract's effect parameters (± standard errors) and plant blocks.
+"""Fitted coefficients to the effect parameters diagnose reports (± standard errors) and plant
+blocks.
 
 Sign conventions follow :mod:`pmsm_sysid.core.physics` (``F = M a + B v + F_effects``):
 cogging ``A sin(2π x/p + φ)`` has regressor coefficients (A cos φ, A sin φ); thrust ripple
