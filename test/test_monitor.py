@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import time
@@ -10,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from pmsm_sysid.core.monitoring import SysIdView, TopicStats, render_sysid, render_topics
+from pmsm_sysid.cli.monitor import render
+from pmsm_sysid.core.monitoring import SysIdView, TopicStats
 
 NS = 1_000_000_000
 
@@ -63,7 +65,7 @@ def test_rate_window_forgets_old_messages() -> None:
 
 def test_sysid_view_parses_identify_gfrf_and_diagnostics() -> None:
     v = SysIdView(max_events=2)
-    assert render_sysid(v.snapshot())[0] == "model: (none yet)"
+    assert "model: none yet" in render(_snap(v), 1.0)
     model = {"input": "thrust", "output": "speed", "sample_rate_hz": 500.0,
              "terms": [{"name": "y(k-1)", "estimate": 0.93, "std": 0.01, "err": 0.9},
                        {"name": "u(k-1)", "estimate": 1e-3, "std": 1e-5, "err": 0.05}],
@@ -86,18 +88,93 @@ def test_sysid_view_parses_identify_gfrf_and_diagnostics() -> None:
     assert [(s["name"], s["passed"]) for s in snap["validation"]] == [
         ("ee", True), ("ue", False), ("gfrf", True)]
     assert [c["message"] for c in snap["changes"]] == ["event 1", "event 2"]
-    text = "\n".join(render_sysid(snap))
-    assert "y(k-1)=0.93" in text and "FAIL out of band" in text and "R2 0.99" in text
+    text = render(_snap(v), 1.0)
+    assert "y(k-1) 0.93" in text and "FAIL" in text and "out of band" in text
     v.on_model("not json {")
     assert v.snapshot()["model"] == {"error": "not JSON"}
 
 
-def test_render_topics_has_one_line_per_topic() -> None:
-    s = TopicStats("/pmsm/speed")
-    for k in range(5):
-        s.feed(k * 0.002, k * 2_000_000, 0.5)
-    lines = render_topics([s.snapshot(0.01)])
-    assert len(lines) == 2 and lines[1].startswith("/pmsm/speed") and "500.0" in lines[1]
+def _snap(v: SysIdView, topics: list[TopicStats] = ()) -> dict:  # type: ignore[assignment]
+    return {"namespace": "/pmsm", "topics": [t.snapshot(100.0) for t in topics],
+            "sysid": v.snapshot()}
+
+
+def _corr(passed: bool, max_abs: float) -> str:
+    return json.dumps({"max_abs": max_abs, "band": 0.06167304400170015, "pass": passed})
+
+
+def _busy_view() -> tuple[SysIdView, list[TopicStats]]:
+    """What a live run publishes: long JSON texts, full-precision numbers, many ridges."""
+    topics = []
+    for name, value in (("thrust", -4.079530182), ("speed", -0.2059921), ("position", 7.39e-5)):
+        s = TopicStats(f"/pmsm/{name}")
+        for k in range(2023):
+            s.feed(99.0 + k / 2023, k * 2_000_000, value)
+        topics.append(s)
+    model = TopicStats("/pmsm_sysid/model")
+    text = json.dumps({"input": "thrust", "output": "position", "sample_rate_hz": 500.0,
+                       "terms": [{"name": "y(k-1)", "estimate": 0.9982449120238887}]})
+    model.feed(99.5, None, text[:48])
+    topics.append(model)
+    v = SysIdView()
+    terms = [{"name": n, "estimate": e, "err": r} for n, e, r in (
+        ("y(k-15)", -1.5415123456789012, 0.61), ("u(k-7)", -0.0022396812345678, 0.2),
+        ("const", 3.722021234567e-15, 0.001), ("y(k-18)u(k-26)", -3.9021123e-16, 0.0004),
+        ("u(k-3)^2", -1.16551e-18, 0.0001), ("y(k-1)y(k-2)", 0.12345678901234567, 0.1))]
+    v.on_model(json.dumps({"output": "speed", "terms": terms,
+                           "validation": {"validation": {"r2": 0.9982449120238887}}}))
+    v.on_ridges(json.dumps({"stable": False, "h1": {"peaks": [{"freq_hz": 16.66687011718}]},
+                            "h2": {"ridges": [{"freq_hz": f} for f in
+                                              (16.8, 116.60000000000001, 149.9, 249.9, 50.0,
+                                               83.3, 183.2)]}}))
+    v.on_validation([{"name": "identifier/cross_validation/speed", "level": 1,
+                      "message": "fail: free-run NRMSE 1.61e-12, R2 1 on the next window",
+                      "values": {"nrmse": "1.6086921969040665e-12", "r2": "0.9982449120238887",
+                                 "min_r2": "0.9", "diverged": "false",
+                                 "corr.ee": _corr(False, 0.9421243257642296),
+                                 "corr.ue": _corr(True, 0.011854537755205102),
+                                 "corr.u2e2": _corr(False, 0.14532937487395034)}},
+                     {"name": "gfrf/validation/position", "level": 0, "message": "ok",
+                      "values": {"r2": "0.99912345678901234", "corr.ee.max_abs": "0.01",
+                                 "corr.ee.band": "0.06", "corr.ee.pass": "true"}},
+                     {"name": "identifier/cross_validation/position", "level": 1,
+                      "message": "fail", "values": {"r2": "0.41234567890123456",
+                                                    "min_r2": "0.9", "diverged": "false"}}])
+    for k in range(4):
+        v.on_change(1795568864.998 + k, [{
+            "name": "identifier/change/speed", "level": 1,
+            "message": "plant change on speed: xval_nrmse, fit_nrmse, harmonics_db",
+            "values": {"reasons": json.dumps(["xval_nrmse", "fit_nrmse", "harmonics_db"]),
+                       "z": json.dumps({"xval_nrmse": 55.96864935708172,
+                                        "fit_nrmse": 47.74053331982079,
+                                        "harmonics_db": 1.8191951921718033})}}])
+    return v, topics
+
+
+def test_view_fits_80_columns_plainly() -> None:
+    """A busy snapshot on an 80-column console: every line fits, no raw JSON, no long
+    numbers; units on values; each validation says pass/fail and why; events have a time."""
+    v, topics = _busy_view()
+    text = render(_snap(v, topics), 12.3, width=80)
+    lines = text.splitlines()
+    assert max(len(line) for line in lines) <= 80, max(lines, key=len)
+    assert "{" not in text and '"' not in text  # no raw JSON
+    assert not re.search(r"\d{7,}", text), re.search(r"\d{7,}", text)  # no 16-digit numbers
+    assert "-4.08 N" in text and "-0.206 m/s" in text and "0.0739 mm" in text
+    assert "Hz" in text and "ms" in text
+    # the latest model as its top terms by ERR: the largest first, the smallest not shown
+    assert text.index("y(k-15) -1.54") < text.index("u(k-7) -0.00224")
+    assert "u(k-3)^2" not in text and "+2" in text
+    by_test = {" ".join(line.split()[:2]): line for line in lines
+               if line.startswith(("identifier ", "gfrf "))}
+    assert "FAIL" in by_test["identifier speed"]
+    assert "ee 0.942 > 0.0617" in by_test["identifier speed"]
+    assert "pass" in by_test["gfrf position"] and "R² 0.999" in by_test["gfrf position"]
+    assert "free-run R² 0.412 < 0.900" in by_test["identifier position"]
+    assert "2023 Hz" in text  # a rate of thousands without an exponent
+    assert "00:" in text and "next-window NRMSE z=56" in text  # event time and reason
+    wide = render(_snap(v, topics), 12.3, width=120)
+    assert max(len(line) for line in wide.splitlines()) <= 120
 
 
 @pytest.mark.ros
@@ -159,7 +236,9 @@ def test_monitor_cli_once_writes_json(ros_env: int, tmp_path: Path) -> None:
     snap = json.loads(out.read_text())
     assert len(snap["topics"]) == 8 and snap["namespace"] == "/quiet"
     assert [t["count"] for t in snap["topics"][:3]] == [0] * 3
-    assert "/quiet/thrust" in proc.stdout and "model: (none yet)" in proc.stdout
+    assert "thrust" in proc.stdout and "model: none yet" in proc.stdout
+    assert max(len(line) for line in proc.stdout.splitlines()) <= 80  # piped: 80 columns
+    assert "\x1b[" not in proc.stdout  # piped: plain text, no colours or cursor moves
 
 
 def test_monitor_cli_bad_interval_is_one_line(ros_env: int) -> None:

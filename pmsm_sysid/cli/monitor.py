@@ -1,13 +1,17 @@
-"""``pmsm-sysid monitor``: live view of the package's topics (rates, last values, gaps, results)."""
+"""``pmsm-sysid monitor``: live view of the package's topics (rates, last values, gaps, results).
+
+On a terminal the view refreshes in place (like ``top``); piped, or with ``--once``, it prints
+plain snapshots (no colours, no cursor movement). The view fits 80 columns; see
+:mod:`.monitor_view` for what it shows.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import Any, TextIO
 
 HELP = "live view of the topics: rates, last values, gaps, latest model, ridges, validation"
-CLEAR = "\x1b[H\x1b[2J"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -17,34 +21,31 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--once", action="store_true",
                    help="listen for --duration seconds, print one snapshot and exit")
     p.add_argument("--interval", type=float, default=0.5, metavar="S",
-                   help="refresh period (default 0.5 s)")
+                   help="refresh period (default 0.5 s; piped: one snapshot per period)")
     p.add_argument("--json", metavar="FILE", default=None,
                    help="write the last snapshot as JSON ('-' = stdout)")
 
 
-def render(snap: dict[str, Any], elapsed_s: float) -> str:
-    """The full-screen view of one snapshot."""
-    from ..core.monitoring import render_sysid, render_topics
+def console(file: TextIO | None = None, width: int | None = None) -> Any:
+    """A rich console on ``file``: plain text (no colours, no cursor moves) unless a terminal."""
+    from rich.console import Console
 
-    head = f"pmsm-sysid monitor  namespace {snap['namespace']}  t = {elapsed_s:.1f} s"
-    return "\n".join([head, "", *render_topics(snap["topics"]), "",
-                      *render_sysid(snap["sysid"])])
+    out = sys.stdout if file is None else file
+    tty = bool(getattr(out, "isatty", lambda: False)())
+    return Console(file=out, width=width, force_terminal=tty, no_color=not tty,
+                   highlight=False, emoji=False, soft_wrap=False)
 
 
-def render_line(snap: dict[str, Any], elapsed_s: float) -> str:
-    """One line per update (when stdout is not a terminal)."""
-    parts = [f"t={elapsed_s:.1f}s"]
-    for s in snap["topics"]:
-        if s["count"] or s["topic"].startswith(snap["namespace"].rstrip("/") + "/"):
-            name = s["topic"].rsplit("/", 1)[-1]
-            parts.append(f"{name} n={s['count']} {s['rate_hz']:.0f}Hz gaps={s['gaps']}")
-    model = snap["sysid"]["model"]
-    if model is not None and "n_terms" in model:
-        parts.append(f"model {model['n_terms']} terms")
-    validation = snap["sysid"]["validation"]
-    if validation:
-        parts.append("validation " + ("PASS" if all(v["passed"] for v in validation) else "FAIL"))
-    return " | ".join(parts)
+def render(snap: dict[str, Any], elapsed_s: float, width: int = 80) -> str:
+    """One snapshot as plain text ``width`` columns wide."""
+    import io
+
+    from .monitor_view import view
+
+    buf = io.StringIO()
+    con = console(buf, width)
+    con.print(view(snap, elapsed_s))
+    return buf.getvalue()
 
 
 def _check(args: argparse.Namespace) -> float | None:
@@ -61,29 +62,40 @@ def _check(args: argparse.Namespace) -> float | None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import contextlib
     import time
+
+    from rich.live import Live
 
     from ..nodes.monitor import MonitorNode
     from ..rosutil import ros_session, stop_on_signals
     from .common import write_json
+    from .monitor_view import view
 
     duration = _check(args)
-    tty = sys.stdout.isatty() and args.json != "-"
+    show = args.json != "-"
+    con = console()
+    live = show and not args.once and con.is_terminal
     with ros_session() as session, stop_on_signals(session.stop):
         node = session.add(MonitorNode(context=session.context, namespace=args.namespace))
         start = time.monotonic()
         snap = node.snapshot()
-        while not session.stop.is_set():
-            left = None if duration is None else duration - (time.monotonic() - start)
-            if left is not None and left <= 0:
-                break
-            session.spin_for(args.interval if left is None else min(args.interval, left))
-            snap = node.snapshot()
-            if not args.once and args.json != "-":
+        screen = (Live(console=con, auto_refresh=False, transient=False) if live
+                  else contextlib.nullcontext())
+        with screen as shown:
+            while not session.stop.is_set():
+                left = None if duration is None else duration - (time.monotonic() - start)
+                if left is not None and left <= 0:
+                    break
+                session.spin_for(args.interval if left is None else min(args.interval, left))
+                snap = node.snapshot()
                 elapsed = time.monotonic() - start
-                text = render(snap, elapsed) if tty else render_line(snap, elapsed)
-                print((CLEAR + text) if tty else text, flush=True)
-        if args.once and args.json != "-":
-            print(render(snap, time.monotonic() - start), flush=True)
+                if shown is not None:
+                    shown.update(view(snap, elapsed), refresh=True)
+                elif show and not args.once:
+                    con.print(view(snap, elapsed))
+                    con.print()
+        if args.once and show:
+            con.print(view(snap, time.monotonic() - start))
     write_json(snap, args.json)
     return 0

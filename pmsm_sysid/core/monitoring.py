@@ -12,6 +12,7 @@ A :class:`TopicStats` is fed ``(receive_time_s, stamp_ns, value)`` per message:
 
 :class:`SysIdView` keeps the latest model / ridges / validation / change events published by
 the identification side (plain dicts and JSON text, converted from the messages by the node).
+The screen itself is drawn by :mod:`pmsm_sysid.cli.monitor_view`.
 """
 
 from __future__ import annotations
@@ -135,7 +136,7 @@ class SysIdView:
             self.model = {"error": "not JSON"}
             return
         terms = [
-            {"name": str(t.get("name", "?")), "estimate": t.get("estimate")}
+            {"name": str(t.get("name", "?")), "estimate": t.get("estimate"), "err": t.get("err")}
             for t in obj.get("terms", []) if isinstance(t, dict)
         ]
         val = obj.get("validation", {})
@@ -178,67 +179,3 @@ class SysIdView:
         return {"model": self.model, "models": dict(self.models), "ridges": self.ridges,
                 "ridge_frequencies": self.ridge_frequencies,
                 "validation": self.validation, "changes": list(self.changes)}
-
-
-def _fmt(value: Any) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    return str(value)
-
-
-def _short(values: list[Any], limit: int = 6) -> str:
-    """``[a, b, c, ...] (N)`` for long lists, numbers in short form."""
-    text = ", ".join(_fmt(v) for v in values[:limit])
-    return f"[{text}, ...] ({len(values)})" if len(values) > limit else f"[{text}]"
-
-
-def render_topics(topics: list[dict[str, Any]]) -> list[str]:
-    """Table lines for the topic snapshots."""
-    lines = [f"{'topic':<34} {'count':>8} {'rate Hz':>9} {'stamp Hz':>9} {'gaps':>5} "
-             f"{'miss':>6} {'age s':>6}  last"]
-    for s in topics:
-        stamp_rate = "-" if s["stamp_rate_hz"] is None else f"{s['stamp_rate_hz']:.1f}"
-        age = "-" if s["age_s"] is None else f"{s['age_s']:.1f}"
-        lines.append(
-            f"{s['topic']:<34} {s['count']:>8d} {s['rate_hz']:>9.1f} {stamp_rate:>9} "
-            f"{s['gaps']:>5d} {s['missing']:>6d} {age:>6}  {_fmt(s['last_value'])}")
-    return lines
-
-
-def render_sysid(view: dict[str, Any]) -> list[str]:
-    """Lines for the latest model, ridges, validation and change events."""
-    model = view["model"]
-    lines: list[str] = []
-    if model is None:
-        lines.append("model: (none yet)")
-    elif "error" in model:
-        lines.append(f"model: {model['error']}")
-    for m in view["models"].values():
-        terms = ", ".join(f"{t['name']}={_fmt(t['estimate'])}" for t in m["terms"][:8])
-        more = " ..." if m["n_terms"] > 8 else ""
-        r2 = m["validation"].get("r2")
-        fit = f", validation R2 {_fmt(r2)}" if r2 is not None else ""
-        lines.append(f"model ({m['output']}, {m['n_terms']} terms{fit}): {terms}{more}")
-    ridges = view["ridges"]
-    if ridges is None and view["ridge_frequencies"] is None:
-        lines.append("ridges: (none yet)")
-    elif ridges is not None and "error" not in ridges:
-        lines.append(f"ridges: H1 peaks {_short(ridges['h1'])} Hz, H2 {_short(ridges['h2'])} "
-                     f"Hz, H3 {_short(ridges['h3'])} Hz")
-    if view["ridge_frequencies"] is not None:
-        lines.append(f"ridge frequencies: {_short(view['ridge_frequencies'])}")
-    validation = view["validation"]
-    if validation is None:
-        lines.append("validation: (none yet)")
-    else:
-        for s in validation:
-            verdict = "PASS" if s["passed"] else "FAIL"
-            lines.append(f"validation {s.get('name', '')}: {verdict} {s.get('message', '')}")
-    if not view["changes"]:
-        lines.append("changes: (none)")
-    for c in view["changes"][-3:]:
-        lines.append(f"change @ {_fmt(c.get('stamp_s'))} s: {c.get('name', '')} "
-                     f"{c.get('message', '')}")
-    return lines
