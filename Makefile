@@ -16,7 +16,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
-.PHONY: venv demo test lint typecheck bags bench clean
+.PHONY: venv demo test lint typecheck bags bench docs clean
 
 venv: $(STAMP)
 
@@ -44,5 +44,8 @@ bench: $(STAMP)
 	$(PY) bench/ofr_bench.py
 	$(PY) bench/gfrf_bench.py
 
+docs: $(STAMP)
+	$(PY) scripts/api_docs.py docs/api
+
 clean:
-	rm -rf $(VENV) $(DEMO_DIR) .pytest_cache .mypy_cache .ruff_cache *.egg-info
+	rm -rf docs/api $(VENV) $(DEMO_DIR) .pytest_cache .mypy_cache .ruff_cache *.egg-info

@@ -16,11 +16,12 @@ setup(
         ("share/" + PACKAGE + "/msg_schemas", glob("msg_schemas/*.msg")),
     ],
     python_requires=">=3.10",
-    install_requires=["numpy", "scipy", "rosbags>=0.10", "PyYAML", "Jinja2", "rich"],
+    # the whole offline tool and the Python API; no ROS wheels (bags are read with rosbags)
+    install_requires=["numpy", "scipy", "rosbags>=0.10", "PyYAML", "matplotlib", "Jinja2",
+                      "rich"],
     extras_require={
-        "report": ["matplotlib"],
         "test": ["pytest", "pytest-xdist", "pytest-timeout", "hypothesis", "ruff", "mypy",
-                 "types-PyYAML", "scipy-stubs", "matplotlib"],
+                 "types-PyYAML", "scipy-stubs", "pdoc"],
         "bench": ["sysidentpy==0.9.0", "numpy<=2.3.5"],
     },
     zip_safe=True,

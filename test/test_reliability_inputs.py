@@ -337,7 +337,7 @@ def test_empty_bags_and_bags_without_definitions(tmp_path: Path, storage: str,
     (["--ny", "0", "--nu", "0"], ["ny + nu > 0"]),
     (["--delay", "0"], ["delay must be >= 1"]),
     (["--degree", "4"], ["invalid choice: 4"]),
-    ([*SMALL, "--corr-lags", "0"], ["correlation tests need max_lag >= 1"]),
+    ([*SMALL, "--corr-lags", "0"], ["corr_lags must be at least 1"]),
     (["--estimate", "4000:6000"], ["estimation range 4000:6000 is outside the recording "
                                    "(0:5000)"]),
     ([*SMALL, "--validate", "4900:5001"], ["validation range 4900:5001 is outside"]),

@@ -46,39 +46,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bagio import read_recording
-    from ..core.datacheck import check_sampling
-    from ..core.discrepancy import DiagnoseOptions, diagnose
-    from ..core.plant import dump_plant, load_plant
+    from ..api import diagnose
 
-    plant = load_plant(args.plant)
-    real = read_recording(args.real, namespace=args.namespace).recording
-    validate = (read_recording(args.validate, namespace=args.namespace).recording
-                if args.validate else None)
-    # derivatives, filters and replays assume one sampling grid: refuse gaps and rate changes
-    for path, rec in ((args.real, real), (args.validate, validate)):
-        if rec is not None:
-            check_sampling(rec.t, rec.sample_rate_hz, f"recording {path}")
-    options = DiagnoseOptions(alpha=args.alpha, min_share=args.min_share,
-                              replay=not args.no_replay, gfrf=not args.no_gfrf)
-    result = diagnose(plant, real, validate, options)
+    found = diagnose(args.plant, args.real, validate=args.validate, namespace=args.namespace,
+                     alpha=args.alpha, min_share=args.min_share, replay=not args.no_replay,
+                     gfrf=not args.no_gfrf)
+    real = found.real
     out = sys.stderr if args.json == "-" else sys.stdout
     print(f"diagnose: plant {args.plant} vs recording {args.real} "
           f"({len(real)} samples at {real.sample_rate_hz:g} Hz"
           f"{', speed derived from position' if real.speed_derived else ''})", file=out)
-    print(result.summary(), file=out)
-    doc = result.to_dict()
-    doc["plant_file"], doc["real"] = str(args.plant), str(args.real)
-    if args.validate:
-        doc["validate"] = str(args.validate)
-    write_json(doc, args.json)
+    print(found.summary(), file=out)
+    write_json(found.to_dict(), args.json)
     if args.corrected_plant:
         path = Path(args.corrected_plant)
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(dump_plant(result.corrected))
+        path.write_text(found.corrected.to_yaml())
     if args.report:
         from ..plots.diagnose import write_report
 
-        index = write_report(result, args.report, title=f"{args.plant} vs {args.real}")
+        index = write_report(found.result, args.report, title=f"{args.plant} vs {args.real}")
         print(f"report: {index}", file=out)
     return 0

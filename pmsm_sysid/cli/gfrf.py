@@ -15,7 +15,7 @@ import math
 import sys
 from typing import Any, TextIO
 
-from .common import read_json, write_json
+from .common import write_json
 
 HELP = "GFRFs, H1 peaks, H2/H3 ridges and poles of an identified model (identify JSON)"
 MAX_ORDER = 4
@@ -72,23 +72,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", metavar="FILE", help="write the gfrf JSON ('-' = stdout)")
 
 
-def _load(path: str) -> Any:
+def _stdin_json() -> Any:
     import json
 
-    from ..core.errors import DataError, GfrfError
+    from ..core.errors import DataError
 
-    if path == "-":
-        try:
-            d = json.loads(sys.stdin.read())
-        except ValueError as exc:
-            raise DataError(f"stdin: not readable JSON ({exc})") from exc
-    else:
-        d = read_json(path)
-    if isinstance(d, dict) and "terms" not in d and isinstance(d.get("last_model"), dict):
-        d = d["last_model"]
-    if not isinstance(d, dict) or "terms" not in d:
-        raise GfrfError(f"{path}: not a model JSON (no 'terms'; expected the output of identify)")
-    return d
+    try:
+        return json.loads(sys.stdin.read())
+    except ValueError as exc:
+        raise DataError(f"stdin: not readable JSON ({exc})") from exc
 
 
 def _num(x: float | None, width: int, fmt: str = ".2f") -> str:
@@ -137,16 +129,10 @@ def _print(res: dict[str, Any], out: TextIO) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..core.errors import DataError, GfrfError, IdentificationError
-    from ..core.gfrf_analysis import analyse_json
+    from ..api import gfrf
 
-    d = _load(args.model)
-    try:
-        res = analyse_json(d, at=args.at, grid=args.grid, orders=args.orders).to_dict()
-    except IdentificationError as exc:
-        raise GfrfError(f"{args.model}: {exc}") from exc
-    except DataError as exc:
-        raise GfrfError(f"{args.model}: bad 'excitation' block: {exc}") from exc
+    model = _stdin_json() if args.model == "-" else args.model
+    res = gfrf(model, at=args.at, grid=args.grid, orders=args.orders).to_dict()
     _print(res, sys.stderr if args.json == "-" else sys.stdout)
     write_json(res, args.json)
     return 0

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 from typing import Any
 
 from .common import parse_fraction, parse_range, write_json
@@ -67,16 +66,21 @@ def add_model_options(p: Any) -> None:
 
 def fit_config(args: argparse.Namespace) -> Any:
     """The FitConfig the options of :func:`add_model_options` ask for."""
-    from ..core.errors import DataError
-    from ..core.identify import FitConfig
-    from ..core.model import Structure
+    from ..api.identification import fit_config as config
 
-    if args.terms < 1:
-        raise DataError("--terms must be at least 1")
-    structure = Structure(ny=args.ny, nu=args.nu, degree=args.degree, delay=args.delay,
-                          constant=not args.no_constant)
-    return FitConfig(structure=structure, n_terms=args.terms, criterion=args.criterion,
-                     rho=args.rho, method=args.method, remove_dc=not args.keep_dc)
+    return config(ny=args.ny, nu=args.nu, degree=args.degree, terms=args.terms,
+                  delay=args.delay, criterion=args.criterion, rho=args.rho,
+                  method=args.method, constant=not args.no_constant, keep_dc=args.keep_dc)
+
+
+def model_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword options of :func:`pmsm_sysid.identify` that the command line asks for."""
+    return {"output": args.output, "input": args.input, "ny": args.ny, "nu": args.nu,
+            "degree": args.degree, "terms": args.terms, "delay": args.delay,
+            "estimate": args.estimate, "validate": None if args.no_validate else args.validate,
+            "criterion": args.criterion, "rho": args.rho, "method": args.method,
+            "constant": not args.no_constant, "keep_dc": args.keep_dc,
+            "corr_lags": args.corr_lags}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -129,21 +133,12 @@ def _alignment_note(report: Any, out: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..bagio import read_recording
-    from ..core.identify import identify_recording
+    from ..api import identify
 
-    config = fit_config(args)
-    loaded = read_recording(args.bag)
-    rec = loaded.recording
-    result = identify_recording(
-        rec, input=args.input, output=args.output, config=config, estimate=args.estimate,
-        validate=None if args.no_validate else args.validate, max_lag_corr=args.corr_lags,
-    )
-    d = result.to_dict()
-    d["source"] = str(Path(args.bag).resolve())  # the recording, for 'report' figures
-    d["alignment"] = loaded.report.to_dict()
+    fit = identify(args.bag, **model_options(args))
+    d = fit.to_dict()
     out = sys.stderr if args.json == "-" else sys.stdout
-    _alignment_note(loaded.report, out)
+    _alignment_note(fit.alignment, out)
     st = d["structure"]
     print(f"{d['input']} -> {d['output']}: {args.method}, {len(d['terms'])} terms of "
           f"{st['n_candidates']} candidates (ny={st['ny']}, nu={st['nu']}, degree="

@@ -61,40 +61,33 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-
     import numpy as np
 
+    from ..api.simulation import simulation_run
     from ..bagio import write_recording
-    from ..core.excitation import ExcitationSource
-    from ..core.physics import effective_substeps, simulate
-    from ..core.plant import load_plant, nominal_plant, plant_to_dict
+    from ..core.physics import effective_substeps
+    from ..core.plant import plant_to_dict
     from .common import replace_bag_dir, write_json
 
-    plant = load_plant(args.plant) if args.plant else nominal_plant()
-    fs = plant.sample_rate_hz
-    n = max(2, round(args.duration * fs))
-    source = ExcitationSource(args.excitation, fs, seed=args.seed, amplitude_n=args.amplitude,
-                              **dict(args.excitation_option))
     out = Path(args.out)
-    replace_bag_dir(out, args.force)
+    if not args.force:
+        replace_bag_dir(out, force=False)  # refuses an existing bag before any work
     started = time.perf_counter()
-    rec = simulate(plant, source.block(0, n), seed=args.seed)
+    sim = simulation_run(args.plant, excitation=args.excitation, duration=args.duration,
+                         seed=args.seed, amplitude=args.amplitude,
+                         excitation_options=dict(args.excitation_option))
+    rec, plant, source = sim.recording, sim.plant, sim.source
     sim_s = time.perf_counter() - started
-    meta = {
-        "excitation": args.excitation,
-        "excitation_amplitude_n": repr(source.amplitude_n),
-        "excitation_options": json.dumps(source.options, sort_keys=True),
-        "plant_file": str(args.plant) if args.plant else "nominal",
-    }
-    write_recording(out, rec, namespace=args.namespace, storage=args.storage, custom_data=meta)
+    replace_bag_dir(out, args.force)
+    write_recording(out, rec, namespace=args.namespace, storage=args.storage)
     total_s = time.perf_counter() - started
+    n, fs = len(rec), plant.sample_rate_hz
     summary = {
         "out": str(out), "storage": args.storage, "namespace": args.namespace,
         "samples": n, "sample_rate_hz": fs, "duration_s": n / fs,
         "excitation": args.excitation, "amplitude_n": source.amplitude_n,
         "excitation_options": source.options, "seed": args.seed,
-        "plant_file": meta["plant_file"], "plant": plant_to_dict(plant),
+        "plant_file": sim.plant_label, "plant": plant_to_dict(plant),
         "effects": list(plant.effects), "rk4_substeps": effective_substeps(plant),
         "thrust_rms_n": float(np.std(rec.thrust)), "speed_rms_mps": float(np.std(rec.speed)),
         "position_min_m": float(rec.position.min()), "position_max_m": float(rec.position.max()),

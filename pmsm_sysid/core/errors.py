@@ -4,7 +4,16 @@ from __future__ import annotations
 
 
 class PmsmSysidError(Exception):
-    """Base of every error the project raises on bad input or an impossible request."""
+    """Base of every error the project raises on bad input or an impossible request.
+
+    Example:
+        >>> import pmsm_sysid as ps
+        >>> try:
+        ...     ps.identify("no/such/bag")
+        ... except ps.PmsmSysidError as exc:
+        ...     print("bad input:", exc)  # doctest: +ELLIPSIS
+        bad input: no/such/bag: ...
+    """
 
 
 class PlantError(PmsmSysidError):
@@ -41,3 +50,7 @@ class BagError(PmsmSysidError):
 
 #: Former name of :class:`PmsmSysidError`, kept so older code that catches it still works.
 SysIdError = PmsmSysidError
+
+
+class OptionError(PmsmSysidError):
+    """An option has a value outside its documented range (checked before any work starts)."""

@@ -29,7 +29,14 @@ WEAK_ERR = 1e-3  # nonlinear terms explaining less output variance: "weak" ridge
 
 @dataclass(frozen=True)
 class GfrfAnalysis:
-    """Result of :func:`analyse`; :meth:`to_dict` is the gfrf JSON."""
+    """Result of :func:`analyse`; :meth:`to_dict` is the gfrf JSON.
+
+    Example:
+        >>> import pmsm_sysid as ps
+        >>> res = ps.gfrf(ps.identify("bags/paper_speed_nominal"))
+        >>> res.stable, round(res.peaks[0]["freq_hz"], 1)
+        (True, 16.5)
+    """
 
     sample_rate_hz: float
     stable: bool

@@ -115,7 +115,14 @@ class Structure:
 
 @dataclass(frozen=True)
 class NarxModel:
-    """An identified polynomial NARX model y(k) = sum_i theta_i * term_i(k)."""
+    """An identified polynomial NARX model y(k) = sum_i theta_i * term_i(k).
+
+    Example:
+        >>> import pmsm_sysid as ps
+        >>> model = ps.identify("bags/paper_speed_nominal").model
+        >>> model.term_names[:2], model.output_name
+        (['const', 'y(k-1)'], 'speed')
+    """
 
     terms: tuple[Term, ...]
     estimates: FloatArray

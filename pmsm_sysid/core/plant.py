@@ -130,7 +130,18 @@ class Quantisation:
 
 @dataclass(frozen=True)
 class Plant:
-    """The linear PMSM of the paper's Table 1 (SI units) plus optional effect blocks."""
+    """The linear PMSM of the paper's Table 1 (SI units) plus optional effect blocks.
+
+    A frozen dataclass: change a field with :func:`dataclasses.replace`, switch effects on
+    with :meth:`with_effects`.
+
+    Example:
+        >>> import pmsm_sysid as ps
+        >>> ps.Plant.nominal().mass_kg
+        2.3213
+        >>> ps.Plant.from_yaml("plants/coulomb.yaml").effects
+        ('coulomb_friction', 'noise')
+    """
 
     mass_kg: float = 2.3213
     viscous_n_per_mps: float = 32.4992
@@ -170,6 +181,20 @@ class Plant:
     def with_effects(self, **blocks: Any) -> Plant:
         """A copy with effect blocks replaced (``None`` switches one off)."""
         return replace(self, **blocks)
+
+    @classmethod
+    def nominal(cls) -> Plant:
+        """The paper's Table 1 motor with every effect off (same as ``Plant()``)."""
+        return nominal_plant()
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> Plant:
+        """Read and check a YAML plant file (``plants/all_effects.yaml`` documents the keys)."""
+        return load_plant(path)
+
+    def to_yaml(self) -> str:
+        """The plant-file YAML text of this plant."""
+        return dump_plant(self)
 
 
 EFFECT_BLOCKS: dict[str, type] = {

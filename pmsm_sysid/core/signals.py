@@ -18,7 +18,19 @@ FloatArray = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class Recording:
-    """Aligned samples of one axis. All arrays have the same length N."""
+    """Aligned samples of one axis. All arrays have the same length N.
+
+    ``t`` (s), ``thrust`` (N), ``speed`` (m/s) and ``position`` (m) are 1-D float arrays;
+    ``sample_rate_hz`` is a float; ``speed_derived`` says speed was computed from position.
+
+    Example:
+        >>> import numpy as np, pmsm_sysid as ps
+        >>> t = np.arange(1000) / 500.0
+        >>> rec = ps.Recording(t=t, thrust=np.sin(t), speed=0 * t, position=0 * t,
+        ...                    sample_rate_hz=500.0)
+        >>> len(rec.window(100, 300))
+        200
+    """
 
     t: FloatArray
     thrust: FloatArray

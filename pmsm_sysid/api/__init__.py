@@ -1,0 +1,21 @@
+"""The public Python API, re-exported at the top level as ``import pmsm_sysid as ps``.
+
+Modules: :mod:`.recordings` (bags), :mod:`.simulation`, :mod:`.identification`,
+:mod:`.frequency` (GFRFs), :mod:`.diagnosis` (sim-to-real). No ROS installation is needed.
+"""
+
+from ..core.errors import PmsmSysidError
+from ..core.gfrf_analysis import GfrfAnalysis
+from ..core.model import NarxModel
+from ..core.plant import Plant
+from ..core.signals import Recording
+from .diagnosis import Diagnosis, diagnose
+from .frequency import gfrf
+from .identification import Identification, identify
+from .recordings import read_bag, write_bag
+from .simulation import simulate
+
+__all__ = [
+    "Diagnosis", "GfrfAnalysis", "Identification", "NarxModel", "Plant", "PmsmSysidError",
+    "Recording", "diagnose", "gfrf", "identify", "read_bag", "simulate", "write_bag",
+]
