@@ -22,11 +22,18 @@ setup(
     extras_require={
         "test": ["pytest", "pytest-xdist", "pytest-timeout", "hypothesis", "ruff", "mypy",
                  "types-PyYAML", "scipy-stubs", "pdoc"],
+        # the live verbs (run, record, replay, monitor) and the nodes: ROS 2 Jazzy wheels;
+        # not needed where a ROS 2 Jazzy installation is sourced
+        "ros": ["ros-jazzy-rclpy~=7.1", "ros-jazzy-common-interfaces~=5.3"],
         "bench": ["sysidentpy==0.9.0", "numpy<=2.3.5"],
     },
     zip_safe=True,
     maintainer="pmsm_sysid maintainers",
     description="Online NARX identification and GFRF analysis of a linear PMSM servo (ROS 2).",
     license="Apache-2.0",
-    entry_points={"console_scripts": ["pmsm-sysid = pmsm_sysid.cli:main"]},
+    entry_points={
+        "console_scripts": ["pmsm-sysid = pmsm_sysid.cli:main"],
+        # fixtures ros_env, ros_context, ros_executor, sim_motor for any project's tests
+        "pytest11": ["pmsm_sysid = pmsm_sysid.testing.pytest_plugin"],
+    },
 )
