@@ -40,6 +40,7 @@ from .kinematics import (
     choose_filter,
     equation_data,
     feedback_z,
+    kinematic_mode,
 )
 from .library import Effect
 from .modelling import Alternative, Model, confirmed_model
@@ -77,6 +78,12 @@ class Segments:
     val: EquationData
     full: EquationData | None
     recs: dict[str, Recording]
+    feedback: float = 0.0
+
+    @property
+    def closed_loop(self) -> bool:
+        """The thrust answers the sensor noise (see :func:`.kinematics.feedback_z`)."""
+        return self.feedback > FEEDBACK_Z
 
 
 def _filter_for(spec: FilterSpec, fs: float) -> FilterSpec:
@@ -101,10 +108,13 @@ def segments(plant: Plant, real: Recording, validate: Recording | None,
     spec = choose_filter(recs["estimation"].speed, recs["estimation"].sample_rate_hz)
     vspec = spec if recs["validation"].sample_rate_hz == recs["estimation"].sample_rate_hz \
         else _filter_for(spec, recs["validation"].sample_rate_hz)
-    est = equation_data(plant, recs["estimation"], spec)
-    val = equation_data(plant, recs["validation"], vspec)
-    full = equation_data(plant, real, spec) if validate is None else None
-    return Segments(est, val, full, recs)
+    mode = kinematic_mode(recs["estimation"], spec)
+    fb = feedback_z(recs["estimation"])
+    closed = fb > FEEDBACK_Z
+    est = equation_data(plant, recs["estimation"], spec, mode, closed)
+    val = equation_data(plant, recs["validation"], vspec, mode, closed)
+    full = equation_data(plant, real, spec, mode, closed) if validate is None else None
+    return Segments(est, val, full, recs, fb)
 
 
 def _drop_one(fit: Fit, data: EquationData, n_tests: float) -> list[float]:
@@ -211,8 +221,7 @@ def diagnose(plant: Plant, real: Recording, validate: Recording | None = None,
 def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
               opts: DiagnoseOptions) -> DiagnoseResult:
     segs = segments(plant, real, validate, opts.split)
-    fb = feedback_z(segs.recs["estimation"])
-    closed = fb > FEEDBACK_Z
+    fb, closed = segs.feedback, segs.closed_loop
     cands = Candidates.build(segs.est, exclude=("thrust_lag",) if closed else ())
     n_tests = sum(f.n_independent for f in cands.families)
     ranking = score_step(segs.est, cands, [], opts.alpha, opts.min_share)

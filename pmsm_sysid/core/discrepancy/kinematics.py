@@ -39,6 +39,7 @@ from ..errors import DiagnoseError
 from ..plant import SIGN_SMOOTHING_MPS, Plant
 from ..signals import Recording
 from .averaging import interval_effects, interval_force, sign_width
+from .instruments import instrumented
 
 FloatArray = NDArray[np.float64]
 
@@ -72,6 +73,12 @@ def choose_filter(speed: FloatArray, fs: float) -> FilterSpec:
     total = float(power.sum())
     if total <= 0.0:
         raise DiagnoseError("the axis does not move: nothing to compare the plant with")
+    hi = freqs > 0.3 * fs
+    if hi.sum() >= 8:  # the white measurement-noise floor, read where a servo has no motion
+        power = np.maximum(power - float(np.median(power[hi])), 0.0)
+        total = float(power.sum())
+        if total <= 0.0:
+            raise DiagnoseError("the axis does not move above its measurement noise")
     cum = np.cumsum(power) / total
     band = float(freqs[int(np.searchsorted(cum, POWER_FRACTION))])
     fc = min(max(CUTOFF_FACTOR * band, 0.05 * fs), 0.2 * fs)
@@ -104,6 +111,39 @@ def feedback_z(rec: Recording) -> float:
             rho = float(np.mean((f - f.mean()) * (z - z.mean()))) / den
             best = max(best, abs(rho) * math.sqrt(len(f)))
     return best
+
+
+def _noise_gain(op: FloatArray, sos: FloatArray) -> float:
+    """Norm of the filtered impulse response of a finite-difference operator."""
+    return float(np.linalg.norm(sosfiltfilt(sos, op)))
+
+
+def _hf_sigma(sig: FloatArray, fs: float) -> float:
+    """White measurement noise of ``sig`` read above 0.3 fs (white fraction there: 0.4)."""
+    hp = butter(4, 0.3 * fs, btype="highpass", fs=fs, output="sos")
+    return float(np.std(sosfiltfilt(hp, sig)[20:-20])) / math.sqrt(0.4)
+
+
+def kinematic_mode(rec: Recording, spec: FilterSpec) -> str:
+    """``position`` when the acceleration is less noisy from the position than from the
+    speed in the filter's band (or the speed is derived), else ``speed``.
+
+    Acceleration from a noisy speed is an error in a regressor (it biases the mass towards
+    zero); a position encoder's noise, differentiated twice but band-limited by the same
+    filter, is usually far smaller. Both noises are read above 0.3 fs and carried through
+    the exact difference operators and the filter.
+    """
+    if rec.speed_derived:
+        return "position"
+    fs = rec.sample_rate_hz
+    sos = np.asarray(butter(spec.order, spec.cutoff_hz, fs=fs, output="sos"))
+    imp = np.zeros(2049)
+    imp[1024] = 1.0
+    d1 = fs * (imp[1:] - imp[:-1])
+    d2 = fs * fs * (imp[2:] - 2.0 * imp[1:-1] + imp[:-2])
+    from_speed = _hf_sigma(rec.speed, fs) * _noise_gain(d1, sos)
+    from_position = _hf_sigma(rec.position, fs) * _noise_gain(d2, sos)
+    return "position" if from_position < from_speed else "speed"
 
 
 def smoothed_speed_noise(rec: Recording, mode: str, sos: FloatArray) -> float:
@@ -144,6 +184,8 @@ class EquationData:
     a: FloatArray
     v_raw: FloatArray
     a_raw: FloatArray
+    a_iv: FloatArray
+    v_iv: FloatArray
     cmd: FloatArray
     force: FloatArray
     y: FloatArray
@@ -217,8 +259,12 @@ def _interval_ends(rec: Recording, mode: str, sos: FloatArray) -> tuple[FloatArr
 
 
 def equation_data(plant: Plant, rec: Recording, filt: FilterSpec | None = None,
-                  mode: str | None = None) -> EquationData:
-    """Build the residual of ``plant`` on ``rec`` (effects already in the plant included)."""
+                  mode: str | None = None, closed_loop: bool = False) -> EquationData:
+    """Build the residual of ``plant`` on ``rec`` (effects already in the plant included).
+
+    ``closed_loop``: the thrust is a feedback of the measurements, so the mass and viscous
+    instruments are built from the thrust one filter memory (``edge`` samples) earlier.
+    """
     fs = rec.sample_rate_hz  # the data's rate; the plant's own rate plays no part here
     mode = mode or ("position" if rec.speed_derived else "speed")
     if mode not in ("speed", "position"):
@@ -243,7 +289,10 @@ def equation_data(plant: Plant, rec: Recording, filt: FilterSpec | None = None,
     t = rec.t[:-1] if mode == "speed" else rec.t[1:-1]
     y = np.ascontiguousarray(sosfiltfilt(sos, resid)[spec.edge:len(resid) - spec.edge:
                                                       spec.decimation])
-    return EquationData(x=xs, v=vs, v_lo=v_lo, v_hi=v_hi, a=as_, v_raw=v, a_raw=a, cmd=cmd,
+    a_iv, v_iv = instrumented(cmd, T, plant.mass_kg, plant.viscous_n_per_mps, mode, a, v,
+                              spec.edge if closed_loop else 0)
+    return EquationData(x=xs, v=vs, v_lo=v_lo, v_hi=v_hi, a=as_, v_raw=v, a_raw=a,
+                        a_iv=a_iv, v_iv=v_iv, cmd=cmd,
                         force=force,
                         y=y, t=t, period=T, mode=mode,
                         filt=spec, sos=sos, speed_noise_mps=noise,

@@ -97,9 +97,9 @@ def raw_columns(e: Effect, data: EquationData) -> FloatArray:
         return interval_friction(data.v_lo, data.v_hi, data.sign_smoothing_mps,
                                  e.velocity_mps)[:, None]
     if e.name == "viscous_error":
-        return data.v_raw[:, None]
+        return data.v_iv[:, None]
     if e.name == "mass_error":
-        return data.a_raw[:, None]
+        return data.a_iv[:, None]
     if e.name == "spring":
         return x[:, None]
     if e.name == "cogging":

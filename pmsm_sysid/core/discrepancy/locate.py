@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 
 from .kinematics import EquationData, thinned, thinned_times
 from .stats import lstsq, nested_f_test
@@ -76,29 +77,64 @@ def _velocity_details(r: FloatArray, v: FloatArray) -> dict[str, Any]:
             "speed_range_mps": [float(v.min()), float(v.max())]}
 
 
-def _sincos(t: FloatArray, f: float) -> FloatArray:
-    return np.column_stack([np.sin(2 * math.pi * f * t), np.cos(2 * math.pi * f * t)])
+NEIGHBOURS = 8  # bins each side that set the local noise level of a spectral line
 
 
-def _strongest_line(r: FloatArray, t: FloatArray, fs: float) -> tuple[float, float]:
-    """Frequency (Hz) of the strongest spectral line above 0 Hz, and its power share.
+def _ratio(spec: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Each bin's power over the mean of its 2*NEIGHBOURS neighbours (its own ±1 left out)."""
+    n = len(spec)
+    kern = np.ones(2 * NEIGHBOURS + 1)
+    kern[NEIGHBOURS - 1:NEIGHBOURS + 2] = 0.0
+    total = np.convolve(spec, kern, mode="same")
+    count = np.convolve(np.ones(n), kern, mode="same")
+    level = total / np.maximum(count, 1.0)
+    return spec / np.maximum(level, 1e-300), level
 
-    The peak of the periodogram is only good to half a bin (1/(2T)), which over T seconds
-    is a phase error of up to π: the frequency is refined by least squares over ±1 bin.
+
+def _line_at(rc: FloatArray, tt: FloatArray, f: float) -> float:
+    """Periodogram value |sum r exp(-2 pi i f t)|^2 at any frequency."""
+    z = rc @ np.exp(-2j * math.pi * f * tt)
+    return float(abs(z) ** 2)
+
+
+def strongest_line(r: FloatArray, t: FloatArray, fs: float,
+                   u: FloatArray | None = None) -> tuple[float, float, float, int]:
+    """The residual's most prominent spectral line, judged against its neighbours.
+
+    A line is a bin whose power stands out of the residual's own spectrum around it (the
+    local level of the 2x8 neighbouring bins): coloured noise has no such bins, so the
+    test holds whatever the noise's colour. Bins where the input ``u`` itself has a line
+    (periodic excitations: multisine, PRBS periods and holds) are left out -- a line the
+    input puts there is the input's, not the plant's. The frequency is refined by least
+    squares over ±1 bin (the periodogram peak is good to half a bin only).
+
+    Returns (frequency Hz, power share of the refined line, ratio to the local level,
+    number of bins searched).
     """
     rc = r - r.mean()
-    spec = np.abs(np.fft.rfft(rc, 8 * len(r))) ** 2  # zero-padded: 1/8 bin steps
-    freqs = np.fft.rfftfreq(8 * len(r), 1.0 / fs)
-    k = int(np.argmax(spec[8:])) + 8
-    bin_hz = fs / len(r)
     tt = t - t[0]
-    best = (0.0, float(freqs[k]))
+    spec = np.abs(np.fft.rfft(rc)) ** 2
+    freqs = np.fft.rfftfreq(len(rc), 1.0 / fs)
+    ratio, level = _ratio(spec)
+    ok = np.zeros(len(spec), dtype=bool)
+    ok[2:len(spec) - 1] = True
+    if u is not None:
+        uratio, _ = _ratio(np.abs(np.fft.rfft(u - u.mean())) ** 2)
+        ok &= uratio < math.log(len(spec) / 1e-3)  # no significant input line at that bin
+    if not ok.any():
+        return 0.0, 0.0, 0.0, 1
+    k = int(np.flatnonzero(ok)[np.argmax(ratio[ok])])
+    bin_hz = fs / len(r)
+    best = (spec[k], float(freqs[k]))
     for f in np.linspace(freqs[k] - bin_hz, freqs[k] + bin_hz, 41):
-        if f <= 0:
-            continue
-        _, e = lstsq(_sincos(tt, float(f)), rc)
-        best = max(best, (float(rc @ rc - e @ e), float(f)))
-    return best[1], best[0] / max(float(rc @ rc), 1e-300)
+        if f > 0:
+            best = max(best, (_line_at(rc, tt, float(f)), float(f)))
+    share = 2.0 * best[0] / len(rc) / max(float(rc @ rc), 1e-300)
+    return best[1], min(share, 1.0), best[0] / max(float(level[k]), 1e-300), int(ok.sum())
+
+
+def _sincos(t: FloatArray, f: float) -> FloatArray:
+    return np.column_stack([np.sin(2 * math.pi * f * t), np.cos(2 * math.pi * f * t)])
 
 
 def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
@@ -134,11 +170,14 @@ def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
         else:
             details = _velocity_details(r, v)
         out.append(AxisFinding(axis, share, -test.corrected_log10_p(len(AXES)), details))
-    f0, line_share = _strongest_line(r, t, data.sample_rate_hz)
+    u = data.project(data.force)
+    f0, line_share, ratio, n_freq = strongest_line(r, t, data.sample_rate_hz, u)
     cols = _sincos(t - t[0], f0)
-    test = nested_f_test(y, base, cols)
     _, r1 = lstsq(np.hstack([base, cols]), y)
-    out.append(AxisFinding("frequency", float(r @ r - r1 @ r1) / yy,
-                           -test.corrected_log10_p(len(AXES) - 1 + n_freq),
-                           {"line_hz": f0, "line_power_share": line_share}))
+    dof2 = 4 * NEIGHBOURS - 4
+    logp = float(stats.f.logsf(ratio, 2, dof2)) / math.log(10.0) if f0 > 0 else 0.0
+    sig = max(0.0, -(logp + math.log10(len(AXES) - 1 + n_freq)))
+    out.append(AxisFinding("frequency", float(r @ r - r1 @ r1) / yy, sig,
+                           {"line_hz": f0, "line_power_share": line_share,
+                            "line_to_local_level": ratio}))
     return out
