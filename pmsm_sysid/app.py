@@ -179,7 +179,8 @@ def _make_node(name: str, ctx: Context, opts: dict[str, Any]) -> Node:
 
     n_outputs = len((opts["identifier_params"] or {}).get("outputs", ("speed", "position")))
     params = {"queue_size": max(2, n_outputs), **(opts["gfrf_params"] or {})}
-    return GfrfNode(context=ctx, parameter_overrides=overrides(params))
+    return GfrfNode(context=ctx, namespace=opts["namespace"],
+                    parameter_overrides=overrides(params))
 
 
 def _make_checked(name: str, ctx: Context, opts: dict[str, Any]) -> Node:
@@ -212,8 +213,9 @@ def build_pipeline(
     ``wait_s``: with the sim node but no identifier here, wait up to that long for another
     process to subscribe to the input topics before the sim starts (0 = start at once).
     """
-    from .rosutil import ros_session
+    from .rosutil import check_namespace, ros_session
 
+    namespace = check_namespace(namespace)
     # the identifier last: its input subscriptions appear just before the executor spins
     names = tuple(sorted(parse_nodes(nodes), key=lambda n: n == "identifier"))
     if clock not in ("wall", "sim"):
@@ -231,7 +233,7 @@ def build_pipeline(
             if "identifier" in names or "gfrf" in names:
                 from .nodes.collector import ResultCollector
 
-                made["collector"] = ResultCollector(context=ctx)
+                made["collector"] = ResultCollector(context=ctx, namespace=namespace)
                 executor.add_node(made["collector"])
             for name in names:
                 made[name] = _make_checked(name, ctx, opts)
@@ -239,7 +241,7 @@ def build_pipeline(
             if pipe.stepped:
                 pipe.sim.stop_timer()  # stepped by the pipeline (back-pressure)
             elif pipe.sim is not None and wait_s > 0 and "identifier" not in names:
-                _wait_until_matched(pipe.sim, executor, namespace, wait_s)
+                _wait_until_matched(pipe.sim, executor, wait_s)
             pipe.started = time.monotonic()
             yield pipe
         finally:
@@ -260,15 +262,11 @@ def _context(context: Context | None, domain_id: int | None,
         executor.shutdown(timeout_sec=2.0)
 
 
-def _wait_until_matched(sim: Any, executor: SingleThreadedExecutor, namespace: str,
-                        wait_s: float) -> bool:
+def _wait_until_matched(sim: Any, executor: SingleThreadedExecutor, wait_s: float) -> bool:
     """Hold the sim node until each of its input publishers is matched by a subscriber in
     another process (or ``wait_s`` passes), then start it: nothing is published into the
     void while the two processes discover each other."""
-    from .topics import INPUT_TYPES, input_topic
-
-    topics = {input_topic(namespace, s) for s in INPUT_TYPES}
-    pubs = [p for p in sim.publishers if p.topic_name in topics]
+    pubs = sim.input_publishers
     sim.stop_timer()
     try:
         deadline = time.monotonic() + wait_s

@@ -31,7 +31,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.utilities import try_shutdown
 
 from .core.errors import BagError, PmsmSysidError
-from .topics import INPUT_TYPES, POSITION, SPEED, THRUST
+from .topics import INPUT_TYPES, POSITION, SPEED, THRUST, normalize_namespace
 
 NS_PER_S = 1_000_000_000
 N = TypeVar("N", bound=Node)
@@ -51,6 +51,22 @@ def data_qos(depth: int = DATA_DEPTH) -> QoSProfile:
         reliability=ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.VOLATILE,
     )
+
+
+def check_namespace(namespace: str) -> str:
+    """``namespace`` normalised (``"a/"`` -> ``"/a"``, ``""`` -> ``"/"``) and checked by
+    the ROS 2 rules; PmsmSysidError naming the problem."""
+    from rclpy.exceptions import InvalidNamespaceException
+    from rclpy.validate_namespace import validate_namespace
+
+    ns = normalize_namespace(namespace)
+    try:
+        validate_namespace(ns)
+    except InvalidNamespaceException as exc:
+        first = str(exc).splitlines()[0].rstrip(":")
+        raise PmsmSysidError(f"--namespace '{namespace}' is not a ROS 2 namespace: "
+                             f"{first}") from exc
+    return ns
 
 
 def env_domain_id() -> int | None:

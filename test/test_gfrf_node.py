@@ -1,4 +1,4 @@
-"""GfrfNode: a model on /pmsm_sysid/model gives the offline gfrf result on the output topics."""
+"""GfrfNode: a model on <ns>/model gives the offline gfrf result on the output topics."""
 
 from __future__ import annotations
 
@@ -95,21 +95,24 @@ def test_node_publishes_the_offline_result(ros_context: Any) -> None:
     from std_msgs.msg import Float64MultiArray, String
 
     from pmsm_sysid.nodes.gfrf_node import GfrfNode
-    from pmsm_sysid.topics import MODEL_TOPIC, RIDGES_ARRAY_TOPIC, RIDGES_TOPIC, VALIDATION_TOPIC
+    from pmsm_sysid.topics import DEFAULT_NAMESPACE, topic_name
+
+    def full(name: str) -> str:
+        return topic_name(DEFAULT_NAMESPACE, name)
 
     node = GfrfNode(context=ros_context)
     probe = Node("gfrf_probe", context=ros_context)
     got: dict[str, list[Any]] = {"ridges": [], "array": [], "validation": []}
-    pub = probe.create_publisher(String, MODEL_TOPIC, 10)
-    probe.create_subscription(String, RIDGES_TOPIC, got["ridges"].append, 10)
-    probe.create_subscription(Float64MultiArray, RIDGES_ARRAY_TOPIC, got["array"].append, 10)
-    probe.create_subscription(DiagnosticArray, VALIDATION_TOPIC, got["validation"].append, 10)
+    pub = probe.create_publisher(String, full("model"), 10)
+    probe.create_subscription(String, full("ridges"), got["ridges"].append, 10)
+    probe.create_subscription(Float64MultiArray, full("ridge_frequencies"), got["array"].append, 10)
+    probe.create_subscription(DiagnosticArray, full("validation"), got["validation"].append, 10)
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(node)
     ex.add_node(probe)
     try:
         assert spin_until(ex, lambda: pub.get_subscription_count() >= 1
-                          and node.count_publishers(MODEL_TOPIC) >= 1, 10.0)
+                          and node.count_publishers(full("model")) >= 1, 10.0)
         model = model_message()
         pub.publish(String(data=json.dumps(model)))
         assert spin_until(ex, lambda: all(got.values()), 30.0), {k: len(v) for k, v in got.items()}

@@ -43,7 +43,8 @@ class _Source:
         self.node = Node("test_source", context=ctx)
         self._make = make_sample_messages
         if joint:
-            self.pub = self.node.create_publisher(JointState, "/joint_states", data_qos())
+            self.pub = self.node.create_publisher(
+                JointState, f"{DEFAULT_NAMESPACE}/joint_states", data_qos())
         else:
             self.pubs = {s: self.node.create_publisher(type(m), input_topic(DEFAULT_NAMESPACE, s),
                                                        data_qos())
@@ -83,16 +84,17 @@ def _run(ctx: Any, data: np.ndarray, params: dict[str, Any], joint: list[str] | 
     from std_msgs.msg import String
 
     from pmsm_sysid.nodes.identifier_node import IdentifierNode
-    from pmsm_sysid.topics import MODEL_TOPIC, VALIDATION_TOPIC
+    from pmsm_sysid.topics import DEFAULT_NAMESPACE, MODEL, VALIDATION, topic_name
 
     node = IdentifierNode(context=ctx, parameter_overrides=[
         Parameter(k, value=v) for k, v in {**SMALL, **params}.items()])
     src = _Source(ctx, joint=joint is not None)
     models: list[dict[str, Any]] = []
     vals: list[Any] = []
-    src.node.create_subscription(String, MODEL_TOPIC, lambda m: models.append(json.loads(m.data)),
-                                 100)
-    src.node.create_subscription(DiagnosticArray, VALIDATION_TOPIC, vals.append, 100)
+    src.node.create_subscription(String, topic_name(DEFAULT_NAMESPACE, MODEL),
+                                 lambda m: models.append(json.loads(m.data)), 100)
+    src.node.create_subscription(DiagnosticArray, topic_name(DEFAULT_NAMESPACE, VALIDATION),
+                                 vals.append, 100)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     ex.add_node(src.node)

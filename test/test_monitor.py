@@ -187,7 +187,7 @@ def test_monitor_node_counts_a_live_stream(ros_context: object) -> None:
 
     from pmsm_sysid.nodes.monitor import MonitorNode
     from pmsm_sysid.rosutil import data_qos, make_sample_messages, message_class
-    from pmsm_sysid.topics import MODEL_TOPIC, SPEED_TYPE
+    from pmsm_sysid.topics import SPEED_TYPE
 
     ns = f"/t{uuid.uuid4().hex[:10]}"  # a namespace of its own: no cross-talk between runs
     mon = MonitorNode(context=ros_context, namespace=ns)  # type: ignore[arg-type]
@@ -195,7 +195,7 @@ def test_monitor_node_counts_a_live_stream(ros_context: object) -> None:
 
     pub_node = Node("pub", context=ros_context)  # type: ignore[arg-type]
     pub = pub_node.create_publisher(message_class(SPEED_TYPE), f"{ns}/speed", data_qos())
-    model_pub = pub_node.create_publisher(String, MODEL_TOPIC, 10)
+    model_pub = pub_node.create_publisher(String, f"{ns}/model", 10)
     ex = SingleThreadedExecutor(context=ros_context)  # type: ignore[arg-type]
     ex.add_node(mon)
     ex.add_node(pub_node)

@@ -160,6 +160,12 @@ def test_topics_without_a_python_type_are_skipped() -> None:
     assert has_header(ok["/pmsm/speed"]) and not has_header(ok["/pmsm_sysid/model"])
     assert remap_topics(ok, "/axis2") == {"/pmsm/speed": "/axis2/speed",
                                           "/pmsm_sysid/model": "/pmsm_sysid/model"}
+    # the pipeline's results and plottable numbers move with its inputs
+    ours = {"/pmsm/speed": "geometry_msgs/msg/TwistStamped", "/pmsm/model": "std_msgs/msg/String",
+            "/pmsm/stats/speed/terms": "std_msgs/msg/Int32", "/other/x": "std_msgs/msg/String"}
+    assert remap_topics(ours, "/b") == {"/pmsm/speed": "/b/speed", "/pmsm/model": "/b/model",
+                                        "/pmsm/stats/speed/terms": "/b/stats/speed/terms",
+                                        "/other/x": "/other/x"}
 
 
 def _env(domain: int, tmp: Path) -> dict[str, str]:

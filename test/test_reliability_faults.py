@@ -414,7 +414,6 @@ def test_identifier_publishes_diverged_models_as_strict_json(ros_context: Any) -
     from pmsm_sysid.core.model import Structure
     from pmsm_sysid.core.tracker import OutputConfig, TrackerConfig, WindowTracker
     from pmsm_sysid.nodes.identifier_node import IdentifierNode
-    from pmsm_sysid.topics import MODEL_TOPIC, VALIDATION_TOPIC
 
     tracker = WindowTracker(TrackerConfig(outputs=(OutputConfig("speed", FitConfig(
         structure=Structure(ny=2, nu=2, degree=2), n_terms=5)),), window=400, hop=200))
@@ -438,11 +437,12 @@ def test_identifier_publishes_diverged_models_as_strict_json(ros_context: Any) -
     val["pass"] = False
     diverged = dataclasses.replace(result, models=(model,), validations=(val,))
 
-    ident = IdentifierNode(context=ros_context, namespace=f"/t{uuid.uuid4().hex[:10]}")
+    ns = f"/t{uuid.uuid4().hex[:10]}"
+    ident = IdentifierNode(context=ros_context, namespace=ns)
     listener = Node(f"listen_{uuid.uuid4().hex[:6]}", context=ros_context)
     got: dict[str, list[Any]] = {"model": [], "validation": []}
-    listener.create_subscription(String, MODEL_TOPIC, lambda m: got["model"].append(m.data), 10)
-    listener.create_subscription(DiagnosticArray, VALIDATION_TOPIC,
+    listener.create_subscription(String, f"{ns}/model", lambda m: got["model"].append(m.data), 10)
+    listener.create_subscription(DiagnosticArray, f"{ns}/validation",
                                  lambda m: got["validation"].append(m), 10)
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(ident)

@@ -79,7 +79,7 @@ def test_sigterm_mid_run_finalises_the_recording(ros_env: int, tmp_path: Path) -
     inputs = [counts[f"/pmsm/{s}"] for s in ("thrust", "speed", "position")]
     # stopped between the three messages of a sample: at most the last sample is partial
     assert n >= 1000 and max(inputs) - min(inputs) <= 3 and min(inputs) - 3 <= n <= min(inputs)
-    assert counts.get("/pmsm_sysid/model", 0) == s["models_published"] >= 2
+    assert counts.get("/pmsm/model", 0) == s["models_published"] >= 2
 
 
 def _recorded(bag: Path) -> int:

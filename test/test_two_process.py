@@ -26,6 +26,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 REPO = Path(__file__).resolve().parents[1]
 PLANT = REPO / "plants" / "nominal_noisy.yaml"
 SECONDS = 6.0
+INPUTS = ("/pmsm/thrust", "/pmsm/speed", "/pmsm/position")
 CLI = [sys.executable, "-m", "pmsm_sysid.cli", "run"]
 
 
@@ -36,7 +37,7 @@ def _models_from_bag(bag: Path) -> dict[str, dict[str, Any]]:
 
     out = {}
     with AnyReader([bag], default_typestore=typestore()) as reader:
-        conns = [c for c in reader.connections if c.topic == "/pmsm_sysid/model"]
+        conns = [c for c in reader.connections if c.topic == "/pmsm/model"]
         for conn, _, raw in reader.messages(connections=conns):
             m = json.loads(reader.deserialize(raw, conn.msgtype).data)
             out[m["model_id"]] = m
@@ -51,7 +52,7 @@ def _recorded_inputs(bag: Path) -> int:
         info: Any = yaml.safe_load((bag / "metadata.yaml").read_text())
         topics = info["rosbag2_bagfile_information"]["topics_with_message_count"]
         return sum(int(t["message_count"]) for t in topics
-                   if t["topic_metadata"]["name"].startswith("/pmsm/"))
+                   if t["topic_metadata"]["name"] in INPUTS)
     except (OSError, yaml.YAMLError, KeyError, TypeError):
         return 0
 

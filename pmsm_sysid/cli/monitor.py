@@ -15,7 +15,8 @@ HELP = "live view of the topics: rates, last values, gaps, latest model, ridges,
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--namespace", default="/pmsm", help="input namespace (default /pmsm)")
+    p.add_argument("--namespace", default="/pmsm",
+                   help="the pipeline's namespace: its inputs and results (default /pmsm)")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S seconds (default: until Ctrl-C; 3 s with --once)")
     p.add_argument("--once", action="store_true",
@@ -68,16 +69,17 @@ def run(args: argparse.Namespace) -> int:
     from rich.live import Live
 
     from ..nodes.monitor import MonitorNode
-    from ..rosutil import ros_session, stop_on_signals
+    from ..rosutil import check_namespace, ros_session, stop_on_signals
     from .common import write_json
     from .monitor_view import view
 
     duration = _check(args)
+    namespace = check_namespace(args.namespace)
     show = args.json != "-"
     con = console()
     live = show and not args.once and con.is_terminal
     with ros_session() as session, stop_on_signals(session.stop):
-        node = session.add(MonitorNode(context=session.context, namespace=args.namespace))
+        node = session.add(MonitorNode(context=session.context, namespace=namespace))
         start = time.monotonic()
         snap = node.snapshot()
         screen = (Live(console=con, auto_refresh=False, transient=False) if live

@@ -12,10 +12,13 @@ HELP = "records the topics (inputs and outputs) to a rosbag2"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="BAG", help="rosbag2 directory to create")
-    p.add_argument("--namespace", default="/pmsm", help="input namespace (default /pmsm)")
+    p.add_argument("--namespace", default="/pmsm",
+                   help="the pipeline's namespace (default /pmsm)")
     p.add_argument("--topics", nargs="+", metavar="TOPIC", default=None,
-                   help="record exactly these topics (default: <ns>/thrust|speed|position "
-                        "and /pmsm_sysid/*); other types are taken from their publishers")
+                   help="record exactly these topics (relative names are taken in the "
+                        "namespace; default: the inputs <ns>/thrust|speed|position, the "
+                        "results <ns>/model|ridges|ridge_frequencies|validation|change and "
+                        "<ns>/stats/*); other types are taken from their publishers")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="stop after S seconds (default: until Ctrl-C or SIGTERM)")
     p.add_argument("--storage", choices=("sqlite3", "mcap"), default="sqlite3",
@@ -53,9 +56,10 @@ def run(args: argparse.Namespace) -> int:
     from ..bagio import BagRecorder
     from ..core.errors import PmsmSysidError
     from ..nodes.recorder import RecorderNode
-    from ..rosutil import ros_session, stop_on_signals
+    from ..rosutil import check_namespace, ros_session, stop_on_signals
     from .common import replace_bag_dir, write_json
 
+    namespace = check_namespace(args.namespace)
     if args.duration is not None and not args.duration > 0:
         raise PmsmSysidError(f"--duration must be > 0, got {args.duration}")
     if args.depth < 1:
@@ -66,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     with ros_session() as session, stop_on_signals(session.stop), \
             BagRecorder(out, storage=args.storage) as recorder:
         node = session.add(RecorderNode(recorder, context=session.context,
-                                        namespace=args.namespace, topics=args.topics,
+                                        namespace=namespace, topics=args.topics,
                                         depth=args.depth))
         print(f"recording {', '.join(sorted(node.types) + sorted(node.pending))} into {out} "
               "(Ctrl-C to stop)", file=info, flush=True)

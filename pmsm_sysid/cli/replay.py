@@ -18,7 +18,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="repeat N times (no N: until Ctrl-C); stamps are shifted forward on "
                         "each pass so they keep increasing")
     p.add_argument("--namespace", default=None,
-                   help="publish the input topics under this namespace instead of the recorded")
+                   help="publish the recorded pipeline's topics (inputs and results) under "
+                        "this namespace instead of the recorded one")
     p.add_argument("--wait", type=float, default=10.0, metavar="S",
                    help="wait up to S seconds for subscribers on the input topics before "
                         "starting (default 10; 0 = start at once)")
@@ -50,15 +51,16 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from ..nodes.replayer import ReplayerNode
-    from ..rosutil import ros_session, stop_on_signals
+    from ..rosutil import check_namespace, ros_session, stop_on_signals
     from .common import write_json
 
     rate = _check(args)
+    namespace = None if args.namespace is None else check_namespace(args.namespace)
     info = sys.stderr if args.json == "-" else sys.stdout
     with ros_session() as session, stop_on_signals(session.stop):
         node = session.add(ReplayerNode(
             args.bag, context=session.context, rate=rate, loops=args.loop,
-            namespace=args.namespace, wait_s=args.wait, burst=args.burst,
+            namespace=namespace, wait_s=args.wait, burst=args.burst,
             drain_rate=args.drain_rate))
         for topic, msgtype in sorted(node.skipped.items()):
             print(f"replay: skipping {topic} ({msgtype}: no Python type for it here)",

@@ -39,7 +39,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="wall: real time (default); sim: stamps k/fs, faster than real time")
     p.add_argument("--rate", type=float, default=1.0, metavar="R",
                    help="with --clock sim and no identifier here: R x real time (0 = max)")
-    p.add_argument("--namespace", default="/pmsm", help="input topic namespace")
+    p.add_argument("--namespace", default="/pmsm",
+                   help="namespace of the pipeline's nodes and topics, inputs and results "
+                        "(default /pmsm; one per motor)")
     p.add_argument("--wait", type=float, default=0.0, metavar="S",
                    help="--nodes sim without identifier: wait up to S s for a subscriber "
                         "on the input topics before the first sample (default 0)")

@@ -1,7 +1,7 @@
 """ResultCollector: keeps the latest identification results seen on the output topics.
 
-Subscribes to ``/pmsm_sysid/model``, ``ridges``, ``validation`` and ``change`` (all sporadic:
-one message per window) and keeps, per output, the last model, ridges and validation
+Subscribes to ``<ns>/model``, ``ridges``, ``validation`` and ``change`` of its namespace
+(all sporadic: one message per window) and keeps, per output, the last model, ridges and validation
 statuses, plus the last ``keep_models`` models, ridges and validations and the last 200
 change events (bounded memory in long runs). ``run --json`` reports from it, so a process
 that only runs the identification side (``--nodes identifier,gfrf``) reports the same way
@@ -19,7 +19,7 @@ from rclpy.context import Context
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from ..topics import CHANGE_TOPIC, MODEL_TOPIC, RIDGES_TOPIC, VALIDATION_TOPIC
+from ..topics import CHANGE, DEFAULT_NAMESPACE, MODEL, RIDGES, VALIDATION
 from .monitor import diagnostic_dicts
 
 DEPTH = 50
@@ -28,10 +28,11 @@ DEPTH = 50
 class ResultCollector(Node):
     """Latest model/ridges/validation per output and the change events, from the topics."""
 
-    def __init__(self, *, context: Context | None = None, node_name: str = "pmsm_results",
-                 keep_models: int = 256) -> None:
+    def __init__(self, *, context: Context | None = None, namespace: str = DEFAULT_NAMESPACE,
+                 node_name: str = "pmsm_results", keep_models: int = 256) -> None:
         # no parameters to serve: fewer entities in every wait of the shared executor
-        super().__init__(node_name, context=context, start_parameter_services=False)
+        super().__init__(node_name, context=context, namespace=namespace,
+                         start_parameter_services=False)
         self.models: dict[str, dict[str, Any]] = {}
         self.model_log: deque[dict[str, Any]] = deque(maxlen=keep_models)
         self.ridges: dict[str, dict[str, Any]] = {}
@@ -40,10 +41,10 @@ class ResultCollector(Node):
         self.validation_log: deque[dict[str, Any]] = deque(maxlen=keep_models)
         self.changes: deque[dict[str, Any]] = deque(maxlen=200)
         self.counts = dict.fromkeys(("model", "ridges", "validation", "change"), 0)
-        self.create_subscription(String, MODEL_TOPIC, self._on_model, DEPTH)
-        self.create_subscription(String, RIDGES_TOPIC, self._on_ridges, DEPTH)
-        self.create_subscription(DiagnosticArray, VALIDATION_TOPIC, self._on_validation, DEPTH)
-        self.create_subscription(DiagnosticArray, CHANGE_TOPIC, self._on_change, DEPTH)
+        self.create_subscription(String, MODEL, self._on_model, DEPTH)
+        self.create_subscription(String, RIDGES, self._on_ridges, DEPTH)
+        self.create_subscription(DiagnosticArray, VALIDATION, self._on_validation, DEPTH)
+        self.create_subscription(DiagnosticArray, CHANGE, self._on_change, DEPTH)
 
     def _on_model(self, msg: String) -> None:
         self.counts["model"] += 1

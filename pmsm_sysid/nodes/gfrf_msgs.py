@@ -1,12 +1,12 @@
 """Wire layouts of the GFRF node's outputs (pure Python; the rclpy builders import lazily).
 
-* ``/pmsm_sysid/ridges`` (std_msgs/String): the gfrf JSON of one model plus
+* ``<ns>/ridges`` (std_msgs/String): the gfrf JSON of one model plus
   ``model_id``, ``output``, ``window`` and ``analysis_time_ms``.
-* ``/pmsm_sysid/ridge_frequencies`` (std_msgs/Float64MultiArray): one row per H1 peak and
+* ``<ns>/ridge_frequencies`` (std_msgs/Float64MultiArray): one row per H1 peak and
   H2/H3 ridge, ``RIDGE_FIELDS`` columns, row-major; ``layout.dim[0]`` is the rows
   (label ``"ridges"``), ``layout.dim[1]`` the columns, its label naming them and the codes
   (``KIND_CODES``; supported: 1 yes, 0 no, -1 not checked).
-* ``/pmsm_sysid/validation`` (diagnostic_msgs/DiagnosticArray): one status per model,
+* ``<ns>/validation`` (diagnostic_msgs/DiagnosticArray): one status per model,
   ``gfrf/validation/<output>``, hardware_id = model id, key/values nmse, r2, osa_r2 (free
   run on the estimation window, Eq. 12 of Liu et al. (2005); osa = one step ahead, Eq. 10), the
   same with a

@@ -1,6 +1,7 @@
 """GfrfNode: GFRFs, ridges and validation statistics of each identified model, live.
 
-Subscribes to ``/pmsm_sysid/model`` (std_msgs/String, the identify JSON of one window plus
+Lives in the pipeline's namespace ``<ns>`` (node ``<ns>/pmsm_gfrf``; topic names relative to
+it). Subscribes to ``<ns>/model`` (std_msgs/String, the identify JSON of one window plus
 ``window``, ``model_id``, ``output``). The subscription callback only hands the raw string to
 a bounded latest-wins queue (``queue_size``, default 1; a model replaced before it was
 analysed is counted as skipped); a worker thread parses it and runs
@@ -8,9 +9,9 @@ analysed is counted as skipped); a worker thread parses it and runs
 the excitation) off the executor. A timer publishes finished results from the executor
 thread (layouts in :mod:`.gfrf_msgs`):
 
-* ``/pmsm_sysid/ridges`` (std_msgs/String): the gfrf JSON + ``model_id``/``output``/``window``;
-* ``/pmsm_sysid/ridge_frequencies`` (std_msgs/Float64MultiArray): one row per peak/ridge;
-* ``/pmsm_sysid/validation`` (diagnostic_msgs/DiagnosticArray): status
+* ``<ns>/ridges`` (std_msgs/String): the gfrf JSON + ``model_id``/``output``/``window``;
+* ``<ns>/ridge_frequencies`` (std_msgs/Float64MultiArray): one row per peak/ridge;
+* ``<ns>/validation`` (diagnostic_msgs/DiagnosticArray): status
   ``gfrf/validation/<output>`` with the model's validation statistics.
 """
 
@@ -30,7 +31,7 @@ from std_msgs.msg import Float64MultiArray, String
 
 from ..core.errors import GfrfError
 from ..core.fitqueue import FitWorker, LatestQueue
-from ..topics import MODEL_TOPIC, RIDGES_ARRAY_TOPIC, RIDGES_TOPIC, VALIDATION_TOPIC
+from ..topics import DEFAULT_NAMESPACE, MODEL, RIDGE_FREQUENCIES, RIDGES, VALIDATION
 from .gfrf_msgs import ridges_message, validation_message
 
 DEFAULTS: dict[str, Any] = {"queue_size": 1, "orders": [1, 2, 3], "publish_period_s": 0.05}
@@ -62,9 +63,10 @@ def analyse_message(text: str, orders: tuple[int, ...] = (1, 2, 3)) -> dict[str,
 class GfrfNode(Node):
     """Model messages in; ridges, ridge frequencies and validation statistics out."""
 
-    def __init__(self, *, context: Context | None = None, node_name: str = "pmsm_gfrf",
+    def __init__(self, *, context: Context | None = None, namespace: str = DEFAULT_NAMESPACE,
+                 node_name: str = "pmsm_gfrf",
                  parameter_overrides: list[Parameter] | None = None) -> None:
-        super().__init__(node_name, context=context,
+        super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides or [])
         p = {k: self.declare_parameter(k, v).value for k, v in DEFAULTS.items()}
         orders = tuple(int(o) for o in p["orders"])
@@ -81,10 +83,10 @@ class GfrfNode(Node):
         self.worker: FitWorker[_Item, dict[str, Any]] = FitWorker(
             self.queue, lambda item: analyse_message(item[0], orders), self._finished,
             on_error=self._failed, latency_of=lambda item: item[1], name="gfrf-worker")
-        self._ridges_pub = self.create_publisher(String, RIDGES_TOPIC, 10)
-        self._array_pub = self.create_publisher(Float64MultiArray, RIDGES_ARRAY_TOPIC, 10)
-        self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION_TOPIC, 10)
-        self.create_subscription(String, MODEL_TOPIC, self._on_model, 10)
+        self._ridges_pub = self.create_publisher(String, RIDGES, 10)
+        self._array_pub = self.create_publisher(Float64MultiArray, RIDGE_FREQUENCIES, 10)
+        self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION, 10)
+        self.create_subscription(String, MODEL, self._on_model, 10)
         self._timer = self.create_timer(float(p["publish_period_s"]), self.publish_results)
         self.worker.start()
 

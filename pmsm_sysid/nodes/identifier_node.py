@@ -1,17 +1,20 @@
 """IdentifierNode: online NARX identification on the live topics.
 
-Subscribes to ``<ns>/thrust|speed|position`` or, with ``input_layout:
-joint_state``, to one ``sensor_msgs/JointState`` topic (``effort``/``velocity``/``position`` of
-``joint_name``). The work is done by :class:`pmsm_sysid.core.engine.OnlineEngine` (alignment,
+The node lives in the pipeline's namespace ``<ns>`` (default ``/pmsm``: node
+``/pmsm/pmsm_identifier``) and every topic name below is relative to it. Subscribes to
+``<ns>/thrust|speed|position`` or, with ``input_layout: joint_state``, to one
+``sensor_msgs/JointState`` topic (``joint_state_topic``, default ``<ns>/joint_states``;
+``effort``/``velocity``/``position`` of ``joint_name``). The work is done by
+:class:`pmsm_sysid.core.engine.OnlineEngine` (alignment,
 window ring, fitting thread) around :class:`pmsm_sysid.core.tracker.WindowTracker` (fits,
 cross-validation, change detection); ``__init__`` only wires parameters, subscriptions,
 publishers and one timer that publishes finished results:
 
-* ``/pmsm_sysid/model`` (std_msgs/String): one identify-JSON per output and window, plus
+* ``<ns>/model`` (std_msgs/String): one identify-JSON per output and window, plus
   ``window`` {start_stamp, end_stamp, seq, ...}, ``fit_time_ms`` and ``model_id``;
-* ``/pmsm_sysid/validation`` (diagnostic_msgs/DiagnosticArray): status
+* ``<ns>/validation`` (diagnostic_msgs/DiagnosticArray): status
   ``identifier/cross_validation/<output>`` per validated model (OK = pass, WARN = fail);
-* ``/pmsm_sysid/change`` (DiagnosticArray): status ``identifier/change/<output>`` at level
+* ``<ns>/change`` (DiagnosticArray): status ``identifier/change/<output>`` at level
   WARN for each detected plant change.
 """
 
@@ -35,21 +38,14 @@ from ..core.errors import DataError
 from ..core.gfrf_analysis import json_safe
 from ..core.tracker import WindowResult, WindowTracker, tracker_config
 from ..rosutil import data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
-from ..topics import (
-    CHANGE_TOPIC,
-    DEFAULT_NAMESPACE,
-    INPUT_TYPES,
-    MODEL_TOPIC,
-    VALIDATION_TOPIC,
-    input_topic,
-)
+from ..topics import CHANGE, DEFAULT_NAMESPACE, INPUT_TYPES, MODEL, VALIDATION
 
 OK, WARN = DiagnosticStatus.OK, DiagnosticStatus.WARN
 DRAIN_ROUNDS = 100  # at most 300 input messages taken per subscription callback
 
 #: Parameters and their defaults (paper structures: speed ny=30 nu=40, position ny=10 nu=10).
 DEFAULTS: dict[str, Any] = {
-    "input_layout": "topics", "joint_name": "", "joint_state_topic": "/joint_states",
+    "input_layout": "topics", "joint_name": "", "joint_state_topic": "joint_states",
     "window": 1000, "hop": 250, "queue_size": 1, "sample_rate_hz": 0.0, "tolerance_s": 0.0,
     "outputs": ["speed", "position"], "method": "ofr", "criterion": "terms",
     "speed.ny": 30, "speed.nu": 40, "speed.degree": 2, "speed.delay": 1, "speed.terms": 15,
@@ -75,7 +71,7 @@ class IdentifierNode(Node):
     def __init__(self, *, context: Context | None = None, namespace: str = DEFAULT_NAMESPACE,
                  node_name: str = "pmsm_identifier",
                  parameter_overrides: list[Parameter] | None = None) -> None:
-        super().__init__(node_name, context=context,
+        super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides or [])
         p = {k: self.declare_parameter(k, v).value for k, v in DEFAULTS.items()}
         self.params = p
@@ -92,18 +88,18 @@ class IdentifierNode(Node):
         self._last_input: float | None = None  # time.monotonic() of the newest input message
         self.stale = False
         self.stale_events = 0
-        self._model_pub = self.create_publisher(String, MODEL_TOPIC, 50)
-        self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION_TOPIC, 50)
-        self._change_pub = self.create_publisher(DiagnosticArray, CHANGE_TOPIC, 50)
-        self._subscribe(p, namespace)
+        self._model_pub = self.create_publisher(String, MODEL, 50)
+        self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION, 50)
+        self._change_pub = self.create_publisher(DiagnosticArray, CHANGE, 50)
+        self._subscribe(p)
         self._timer = self.create_timer(float(p["publish_period_s"]), self.publish_results)
         self.engine.start()
 
-    def _subscribe(self, p: dict[str, Any], namespace: str) -> None:
+    def _subscribe(self, p: dict[str, Any]) -> None:
         if p["input_layout"] == "topics":
             self._types = {sig: message_class(t) for sig, t in INPUT_TYPES.items()}
             self._subs = {sig: self.create_subscription(
-                self._types[sig], input_topic(namespace, sig), self._on_raw(sig), data_qos(),
+                self._types[sig], sig, self._on_raw(sig), data_qos(),
                 raw=True) for sig in INPUT_TYPES}
         elif p["input_layout"] == "joint_state":
             if not p["joint_name"]:

@@ -1,9 +1,10 @@
 """MonitorNode: subscribes to the package's topics and keeps :mod:`core.monitoring` stats.
 
-Inputs (``<ns>/thrust|speed|position``) are subscribed with the data QoS (reliable,
-keep-last 1000) so that the monitor itself does not create gaps; the identification outputs
-under ``/pmsm_sysid`` with reliable keep-last 10. Both match reliable publishers of any depth
-and durability.
+The node lives in the watched namespace ``<ns>`` (``<ns>/pmsm_monitor``) and subscribes to
+relative names, so it sees that pipeline only. Inputs (``<ns>/thrust|speed|position``) are
+subscribed with the data QoS (reliable, keep-last 1000) so that the monitor itself does not
+create gaps; the identification outputs (``<ns>/model``, ...) with reliable keep-last 10.
+Both match reliable publishers of any depth and durability.
 """
 
 from __future__ import annotations
@@ -20,14 +21,14 @@ from std_msgs.msg import Float64MultiArray, String
 from ..core.monitoring import SysIdView, TopicStats
 from ..rosutil import data_qos, message_class, sample_value, stamp_to_ns
 from ..topics import (
-    CHANGE_TOPIC,
+    CHANGE,
     DEFAULT_NAMESPACE,
     INPUT_TYPES,
-    MODEL_TOPIC,
-    RIDGES_ARRAY_TOPIC,
-    RIDGES_TOPIC,
-    VALIDATION_TOPIC,
-    input_topic,
+    MODEL,
+    RIDGE_FREQUENCIES,
+    RIDGES,
+    VALIDATION,
+    normalize_namespace,
 )
 
 
@@ -54,31 +55,32 @@ class MonitorNode(Node):
     def __init__(self, *, context: Context | None = None, namespace: str = DEFAULT_NAMESPACE,
                  node_name: str = "pmsm_monitor",
                  now: Callable[[], float] = time.monotonic) -> None:
-        super().__init__(node_name, context=context)
+        super().__init__(node_name, context=context, namespace=namespace)
         self._now = now
-        self.namespace = namespace
+        self.namespace = normalize_namespace(self.get_namespace())
         self.stats: dict[str, TopicStats] = {}
         self.view = SysIdView()
         for signal, type_name in INPUT_TYPES.items():
-            topic = input_topic(namespace, signal)
+            topic = self.resolve_topic_name(signal)
             self.stats[topic] = TopicStats(topic, type_name)
-            self.create_subscription(message_class(type_name), topic,
+            self.create_subscription(message_class(type_name), signal,
                                      self._input_callback(topic, signal), data_qos())
         outputs: list[tuple[str, Any, Callable[[Any], None]]] = [
-            (MODEL_TOPIC, String, lambda m: self.view.on_model(m.data)),
-            (RIDGES_TOPIC, String, lambda m: self.view.on_ridges(m.data)),
-            (RIDGES_ARRAY_TOPIC, Float64MultiArray,
+            (MODEL, String, lambda m: self.view.on_model(m.data)),
+            (RIDGES, String, lambda m: self.view.on_ridges(m.data)),
+            (RIDGE_FREQUENCIES, Float64MultiArray,
              lambda m: self.view.on_ridge_frequencies(list(m.data))),
-            (VALIDATION_TOPIC, DiagnosticArray,
+            (VALIDATION, DiagnosticArray,
              lambda m: self.view.on_validation(diagnostic_dicts(m))),
-            (CHANGE_TOPIC, DiagnosticArray,
+            (CHANGE, DiagnosticArray,
              lambda m: self.view.on_change(stamp_to_ns(m.header.stamp) / 1e9,
                                            diagnostic_dicts(m))),
         ]
-        for topic, cls, handler in outputs:
+        for name, cls, handler in outputs:
             type_name = f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"
+            topic = self.resolve_topic_name(name)
             self.stats[topic] = TopicStats(topic, type_name)
-            self.create_subscription(cls, topic, self._output_callback(topic, handler), 10)
+            self.create_subscription(cls, name, self._output_callback(topic, handler), 10)
 
     def _input_callback(self, topic: str, signal: str) -> Callable[[Any], None]:
         stats = self.stats[topic]

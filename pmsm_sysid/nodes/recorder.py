@@ -1,7 +1,9 @@
 """RecorderNode: subscribes with ``raw=True`` and stores the CDR bytes through a BagRecorder.
 
-- Topics: by default the standard inputs under the namespace plus the identification outputs
-  (``/pmsm_sysid/*``); with ``topics`` exactly those. Topics of known type are subscribed at
+- Topics: by default the inputs, the identification outputs and their plottable numbers under
+  the namespace (``<ns>/thrust``, ``<ns>/model``, ``<ns>/stats/speed/free_run_r2``, ...; the
+  node itself is ``<ns>/pmsm_record``); with ``topics`` exactly those (relative names are
+  resolved in the namespace). Topics of known type are subscribed at
   once (nothing published after the recorder starts is missed); others when they show up in
   the ROS graph, with the type and reliability their publishers offer.
 - QoS: reliable, keep-last ``depth`` (default 10000 per topic, 20 s at 500 Hz) so bursts from a
@@ -25,35 +27,36 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from ..bagio import BagRecorder
 from ..rosutil import data_qos, message_class
 from ..topics import (
-    CHANGE_TOPIC,
     DEFAULT_NAMESPACE,
     INPUT_TYPES,
-    MODEL_TOPIC,
-    RIDGES_ARRAY_TOPIC,
-    RIDGES_TOPIC,
-    VALIDATION_TOPIC,
-    input_topic,
+    OUTPUT_TYPES,
+    STAT_TOPICS,
+    normalize_namespace,
+    stat_topic,
+    topic_name,
 )
 
-OUTPUT_TYPES = {
-    MODEL_TOPIC: "std_msgs/msg/String",
-    RIDGES_TOPIC: "std_msgs/msg/String",
-    RIDGES_ARRAY_TOPIC: "std_msgs/msg/Float64MultiArray",
-    VALIDATION_TOPIC: "diagnostic_msgs/msg/DiagnosticArray",
-    CHANGE_TOPIC: "diagnostic_msgs/msg/DiagnosticArray",
-}
-
-
-def known_type(topic: str) -> str | None:
-    """The standard type of ``topic`` when its name fixes it (inputs, outputs), else None."""
-    if topic in OUTPUT_TYPES:
-        return OUTPUT_TYPES[topic]
-    return INPUT_TYPES.get(topic.rsplit("/", 1)[-1])
+STAT_OUTPUTS = ("speed", "position")  # outputs whose plottable numbers are recorded by default
 
 
 def default_topics(namespace: str) -> dict[str, str]:
-    """topic -> type recorded by default: the three inputs and the identification outputs."""
-    return {**{input_topic(namespace, s): t for s, t in INPUT_TYPES.items()}, **OUTPUT_TYPES}
+    """topic -> type recorded by default: the three inputs, the identification outputs and
+    the plottable numbers of the speed and position models, all under ``namespace``."""
+    rel = {**INPUT_TYPES, **OUTPUT_TYPES,
+           **{stat_topic(o, q): t for o in STAT_OUTPUTS for q, (t, _, _) in STAT_TOPICS.items()}}
+    return {topic_name(namespace, name): t for name, t in rel.items()}
+
+
+def known_type(topic: str, namespace: str = DEFAULT_NAMESPACE) -> str | None:
+    """The type of the full topic name ``topic`` when its name fixes it (an input under any
+    namespace, or an output or plottable number under ``namespace``), else None."""
+    ns = normalize_namespace(namespace).rstrip("/") + "/"
+    rel = topic[len(ns):] if topic.startswith(ns) else None
+    if rel is not None:
+        for name, t in default_topics("/").items():
+            if name == "/" + rel:
+                return t
+    return INPUT_TYPES.get(topic.rsplit("/", 1)[-1])
 
 
 class RecorderNode(Node):
@@ -63,13 +66,15 @@ class RecorderNode(Node):
                  namespace: str = DEFAULT_NAMESPACE, topics: Sequence[str] | None = None,
                  depth: int = 10000, flush_period_s: float = 1.0,
                  node_name: str = "pmsm_record") -> None:
-        super().__init__(node_name, context=context)
+        super().__init__(node_name, context=context, namespace=namespace)
         self.recorder = recorder
         self.depth = depth
         self.counts: Counter[str] = Counter()
         self.first_receive_ns: int | None = None
-        wanted = default_topics(namespace) if topics is None else {
-            self.resolve_topic_name(t): known_type(self.resolve_topic_name(t)) for t in topics}
+        ns = self.get_namespace()
+        wanted = {self.resolve_topic_name(t): ty for t, ty in default_topics(ns).items()} \
+            if topics is None else {self.resolve_topic_name(t):
+                                    known_type(self.resolve_topic_name(t), ns) for t in topics}
         self.pending = {t for t, ty in wanted.items() if ty is None}
         self.types: dict[str, str] = {}
         for topic, msgtype in wanted.items():

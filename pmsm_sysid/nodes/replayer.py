@@ -68,14 +68,15 @@ def input_prefix(topics: dict[str, str]) -> str | None:
 
 
 def remap_topics(topics: dict[str, str], namespace: str | None) -> dict[str, str]:
-    """recorded topic -> published topic: the input namespace moved to ``namespace``."""
+    """recorded topic -> published topic: the input namespace, and every topic under it
+    (the pipeline's outputs and plottable numbers), moved to ``namespace``."""
     if namespace is None:
         return {t: t for t in topics}
     old = input_prefix(topics)
     if old is None:
         raise BagError("--namespace given but the bag has no <ns>/thrust|speed|position topics")
     new = "/" + namespace.strip("/") if namespace.strip("/") else ""
-    return {t: (new + t[len(old):] if t.rsplit("/", 1)[0] == old else t) for t in topics}
+    return {t: (new + t[len(old):] if t.startswith(old + "/") else t) for t in topics}
 
 
 def header_stamp_ns(data: bytes) -> int:
@@ -149,15 +150,17 @@ class ReplayerNode(Node):
                  wait_s: float = 10.0, settle_s: float = 0.25, linger_s: float = 1.0,
                  burst: int = 500, drain_rate: float = 5000.0,
                  node_name: str = "pmsm_replay") -> None:
-        super().__init__(node_name, context=context)
+        topics, skipped = publishable(bag_topics(Path(path)))
+        if not topics:
+            raise BagError(f"{path}: no topic with a message type available here "
+                           f"(skipped: {', '.join(sorted(skipped))})")
+        remap = remap_topics(topics, namespace)
+        home = namespace if namespace is not None else input_prefix(topics) or "/"
+        super().__init__(node_name, context=context, namespace=home)
         self.path = Path(path)
         self.rate, self.loops, self.burst, self.drain_rate = rate, loops, burst, drain_rate
         self.wait_s, self.settle_s, self.linger_s = wait_s, settle_s, linger_s
-        self.topics, self.skipped = publishable(bag_topics(self.path))
-        if not self.topics:
-            raise BagError(f"{self.path}: no topic with a message type available here "
-                           f"(skipped: {', '.join(sorted(self.skipped))})")
-        self.remap = remap_topics(self.topics, namespace)
+        self.topics, self.skipped, self.remap = topics, skipped, remap
         self.headers = {t: has_header(ty) for t, ty in self.topics.items()}
         self.offset_ns = loop_offset_ns(self.path, self.headers) if loops != 1 else 0
         self.matched: dict[str, int] = {}

@@ -5,9 +5,10 @@ equal the offline simulation of the same plant and seed bit for bit):
 
 1. ``(speed, position) = sim.measure()``  — measured at t_k;
 2. ``u = excitation[k]``;
-3. publish ``<ns>/thrust`` (WrenchStamped force.x = u), ``<ns>/speed`` (TwistStamped
-   linear.x), ``<ns>/position`` (PointStamped point.x), all with ``header.stamp = t_k``
-   (and ``/clock = t_k`` first with the sim clock);
+3. publish ``<ns>/thrust`` (WrenchStamped force.x = u; ``<ns>`` is the node's namespace,
+   default ``/pmsm``: node ``/pmsm/pmsm_sim``, topic names relative to it), ``<ns>/speed``
+   (TwistStamped linear.x), ``<ns>/position`` (PointStamped point.x), all with
+   ``header.stamp = t_k`` (and ``/clock = t_k`` first with the sim clock);
 4. ``sim.advance(u)`` — u held over [t_k, t_{k+1}).
 
 Clock (parameter ``clock``): ``wall`` stamps t_k = start time + k/fs (a drift-free sample
@@ -22,10 +23,10 @@ themselves).
 
 Parameters mirror the plant file: the plant's scalars by name, each effect
 block as ``<effect>.enabled`` plus ``<effect>.<key>`` (``cogging.harmonics`` is a YAML/JSON
-list), and ``excitation``, ``amplitude_n``, ``seed``, ``namespace``, ``clock``, ``rate``,
+list), and ``excitation``, ``amplitude_n``, ``seed``, ``clock``, ``rate``,
 ``burst``, ``max_samples``, ``frame_id``. A change at run time rebuilds the plant (validated:
 invalid values are rejected with the reason) and calls ``sim.set_plant`` keeping the state.
-``sample_rate_hz``, ``seed``, ``namespace``, ``clock`` and ``frame_id`` are fixed once running.
+``sample_rate_hz``, ``seed``, ``clock`` and ``frame_id`` are fixed once running.
 
 Data QoS: reliable, keep-last 1000 (:func:`pmsm_sysid.rosutil.data_qos`).
 """
@@ -50,10 +51,10 @@ from ..core.excitation import DEFAULT_AMPLITUDE_N, EXCITATIONS, ExcitationSource
 from ..core.physics import MotorSimulator
 from ..core.plant import EFFECT_BLOCKS, Plant, nominal_plant, plant_from_dict, plant_to_dict
 from ..rosutil import data_qos, make_sample_messages, seconds_to_ns, stamp_from_ns
-from ..topics import DEFAULT_NAMESPACE, INPUT_TYPES, POSITION, SPEED, THRUST, input_topic
+from ..topics import DEFAULT_NAMESPACE, INPUT_TYPES, POSITION, SPEED, THRUST
 
 ParamValue = bool | int | float | str
-FIXED = ("sample_rate_hz", "seed", "namespace", "clock", "frame_id")
+FIXED = ("sample_rate_hz", "seed", "clock", "frame_id")
 _BLOCK = 1000  # excitation samples computed per call
 _MAX_CATCH_UP = 50  # samples per timer callback when the timer runs late (paced clocks)
 
@@ -166,17 +167,17 @@ class MotorSimNode(Node):
                  node_name: str = "pmsm_sim",
                  parameter_overrides: list[Parameter] | None = None,
                  cli_args: list[str] | None = None) -> None:
-        super().__init__(node_name, context=context, cli_args=cli_args,
+        super().__init__(node_name, context=context, namespace=namespace, cli_args=cli_args,
                          parameter_overrides=parameter_overrides or [])
         try:
-            self._wire(plant, excitation, seed, amplitude_n, namespace, clock, rate, burst,
+            self._wire(plant, excitation, seed, amplitude_n, clock, rate, burst,
                        max_samples, frame_id, excitation_options)
         except BaseException:
             self.destroy_node()  # type: ignore[no-untyped-call]
             raise
 
     def _wire(self, plant: Plant | None, excitation: str, seed: int, amplitude_n: float | None,
-              namespace: str, clock: str, rate: float, burst: int, max_samples: int,
+              clock: str, rate: float, burst: int, max_samples: int,
               frame_id: str, excitation_options: Mapping[str, Any] | None) -> None:
         if excitation not in EXCITATIONS:
             raise ExcitationError(f"unknown excitation '{excitation}'; valid: "
@@ -185,7 +186,7 @@ class MotorSimNode(Node):
             **plant_parameters(plant or nominal_plant()), "excitation": excitation,
             "amplitude_n": float(DEFAULT_AMPLITUDE_N[excitation] if amplitude_n is None
                                  else amplitude_n),
-            "seed": int(seed), "namespace": namespace, "clock": clock, "rate": float(rate),
+            "seed": int(seed), "clock": clock, "rate": float(rate),
             "burst": int(burst), "max_samples": int(max_samples), "frame_id": frame_id,
         }
         self.values = {name: self.declare_parameter(name, value).value
@@ -198,8 +199,7 @@ class MotorSimNode(Node):
         self.published = 0
         self.finished = False
         self._msgs = make_sample_messages(0, 0.0, 0.0, 0.0, v["frame_id"])
-        self._pubs = {sig: self.create_publisher(type(self._msgs[sig]),
-                                                 input_topic(v["namespace"], sig), data_qos())
+        self._pubs = {sig: self.create_publisher(type(self._msgs[sig]), sig, data_qos())
                       for sig in INPUT_TYPES}
         self._clock_pub = (self.create_publisher(Clock, "/clock", 10)
                            if v["clock"] == "sim" else None)
@@ -207,6 +207,11 @@ class MotorSimNode(Node):
         self._pace_start = (time.monotonic(), 0)
         self._timer = self.create_timer(self._timer_period(), self._on_timer)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    @property
+    def input_publishers(self) -> list[Any]:
+        """The publishers of ``<ns>/thrust``, ``<ns>/speed`` and ``<ns>/position``."""
+        return list(self._pubs.values())
 
     # ------------------------------------------------------------------ stepping
     def stamp_ns(self, k: int) -> int:
