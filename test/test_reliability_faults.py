@@ -523,7 +523,7 @@ def test_run_record_interrupted_or_killed(ros_env: int, tmp_path: Path, sig: int
         total = 0
         for conn, _, raw in reader.messages():
             total += 1
-            if conn.topic.startswith("/pmsm/"):
+            if conn.topic in {f"/pmsm/{s}" for s in SIGNALS}:  # the inputs
                 msg = reader.deserialize(raw, conn.msgtype)
                 stamps.setdefault(conn.topic, []).append(
                     msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec)
