@@ -351,6 +351,7 @@ def pipeline_summary(pipe: Pipeline) -> dict[str, Any]:
         "change_events": (list(ident.last["changes"]) if ident is not None
                           else list(col.changes) if col is not None else []),
         "errors": list(ident.errors) if ident is not None else [],
+        "history": col.history.to_dict() if col is not None else None,
     })
     if gfrf is not None:
         g = gfrf.summary()

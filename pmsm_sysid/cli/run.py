@@ -35,6 +35,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="comma list of sim, identifier, gfrf (default: all three)")
     p.add_argument("--record", metavar="BAG", help="record inputs and outputs to a new bag")
     p.add_argument("--json", metavar="FILE", help="summary at exit as JSON ('-' = stdout)")
+    p.add_argument("--report", metavar="DIR",
+                   help="at exit, write DIR/index.html: the models over time, window by "
+                        "window, and the last model (also: pmsm-sysid report SUMMARY.json)")
     p.add_argument("--clock", choices=("wall", "sim"), default="wall",
                    help="wall: real time (default); sim: stamps k/fs, faster than real time")
     p.add_argument("--rate", type=float, default=1.0, metavar="R",
@@ -98,6 +101,11 @@ def _check(args: argparse.Namespace) -> None:
         raise PmsmSysidError("--rate applies to --clock sim only")
     if not args.wait >= 0:
         raise PmsmSysidError(f"--wait must be >= 0, got {args.wait}")
+    if args.report is not None:
+        from pathlib import Path
+
+        if Path(args.report).exists() and not Path(args.report).is_dir():
+            raise PmsmSysidError(f"--report {args.report}: exists and is not a directory")
 
 
 def _headline(s: dict[str, Any]) -> str:
@@ -150,4 +158,8 @@ def run(args: argparse.Namespace) -> int:
     write_json(summary, args.json)
     out = sys.stderr if args.json == "-" else sys.stdout
     print(f"pmsm-sysid run: {_headline(summary)}", file=out)
+    if args.report:
+        from ..report.build import report_summary
+
+        print(f"pmsm-sysid run: report {report_summary(summary, args.report).index}", file=out)
     return 0

@@ -19,6 +19,7 @@ from rclpy.context import Context
 from rclpy.node import Node
 from std_msgs.msg import String
 
+from ..core.history import RunHistory
 from ..topics import CHANGE, DEFAULT_NAMESPACE, MODEL, RIDGES, VALIDATION
 from .monitor import diagnostic_dicts
 
@@ -40,6 +41,7 @@ class ResultCollector(Node):
         self.validation: dict[str, dict[str, Any]] = {}
         self.validation_log: deque[dict[str, Any]] = deque(maxlen=keep_models)
         self.changes: deque[dict[str, Any]] = deque(maxlen=200)
+        self.history = RunHistory()  # window by window, for the report of the run
         self.counts = dict.fromkeys(("model", "ridges", "validation", "change"), 0)
         self.create_subscription(String, MODEL, self._on_model, DEPTH)
         self.create_subscription(String, RIDGES, self._on_ridges, DEPTH)
@@ -52,6 +54,7 @@ class ResultCollector(Node):
         if obj is not None:
             self.models[str(obj.get("output"))] = obj
             self.model_log.append(obj)
+            self.history.model(obj)
 
     def _on_ridges(self, msg: String) -> None:
         self.counts["ridges"] += 1
@@ -59,17 +62,20 @@ class ResultCollector(Node):
         if obj is not None:
             self.ridges[str(obj.get("output"))] = obj
             self.ridges_log.append(obj)
+            self.history.ridges(obj)
 
     def _on_validation(self, msg: DiagnosticArray) -> None:
         self.counts["validation"] += 1
         for s in diagnostic_dicts(msg):
             self.validation[s["name"]] = s
             self.validation_log.append(s)
+            self.history.validation(s)
 
     def _on_change(self, msg: DiagnosticArray) -> None:
         self.counts["change"] += 1
         for s in diagnostic_dicts(msg):
             self.changes.append(s)
+            self.history.change(s)
 
 
 def _json(text: str) -> dict[str, Any] | None:

@@ -202,7 +202,10 @@ class IdentifierNode(Node):
             self.models_published += 1
         stamp = stamp_from_ns(round(r.end_stamp * 1e9))
         if r.validations:
-            arr = DiagnosticArray(status=[self._validation_status(v) for v in r.validations])
+            score = {d["output"]: d for d in r.decisions}  # the change detector, per output
+            arr = DiagnosticArray(status=[self._validation_status(
+                v, score.get(v["output"]), float(self.params["change.s_confirm"]))
+                for v in r.validations])
             arr.header.stamp = stamp
             self._val_pub.publish(arr)
             for v in r.validations:
@@ -219,7 +222,8 @@ class IdentifierNode(Node):
                     f"{c['reasons']}")
 
     @staticmethod
-    def _validation_status(v: dict[str, Any]) -> DiagnosticStatus:
+    def _validation_status(v: dict[str, Any], decision: dict[str, Any] | None = None,
+                           threshold: float | None = None) -> DiagnosticStatus:
         fr = v["free_run"]
         n_est = sum(t["pass"] for t in v["correlation_tests"].values())
         n_new = sum(t["pass"] for t in v["correlation_tests_validation"].values())
@@ -233,6 +237,9 @@ class IdentifierNode(Node):
                             ("corr_next", "correlation_tests_validation")):
             for name, t in v[key].items():
                 values[f"{prefix}.{name}"] = {k: t[k] for k in ("max_abs", "band", "pass")}
+        if decision is not None:  # the change statistic of this window and its threshold
+            values.update(change_score=decision["score"], change_state=decision["state"],
+                          change_threshold=threshold)
         return status(f"identifier/cross_validation/{v['output']}", OK if v["pass"] else WARN,
                       msg, v["model_id"], values)
 

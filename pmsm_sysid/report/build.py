@@ -7,7 +7,9 @@ recording (bag dir)    identify with the given protocol (default: the paper's sp
                        then GFRFs; every figure; ``identify.json`` and ``gfrf.json`` beside
 identify JSON          its model's figures; the time-domain ones from the recording named
                        by its ``source`` key (when found; otherwise the page says why)
-``run --json`` summary its ``last_model`` as an identify JSON without a recording
+``run --json`` summary  the run over time from its window-by-window history (fit, terms,
+                       H1 peak, change score, latency), then its ``last_model`` as an
+                       identify JSON without a recording
 gfrf JSON              peak and ridge tables; the GFRF figures when it carries ``grid``
 diagnose JSON          its tables; its figures by repeating the diagnosis on the recordings
                        it names (when found and reproduced; otherwise the page says why)
@@ -112,7 +114,7 @@ def report_bag(bag: str | Path, out_dir: str | Path,
 
 
 def _identify(d: dict[str, Any], rec: Any, sink: Sink, files: tuple[Path, ...],
-              what: str, why: str = "") -> ReportResult:
+              what: str, why: str = "", before: tuple[Section, ...] = ()) -> ReportResult:
     from ..core.gfrf_analysis import analyse_json
     from ..core.model import NarxModel
     from . import frequency, identify
@@ -122,7 +124,7 @@ def _identify(d: dict[str, Any], rec: Any, sink: Sink, files: tuple[Path, ...],
         signals, validation = identify.series_sections(d, model, rec, sink)
         sections = [signals, identify.model_section(d), validation]
     else:
-        sections = [identify.model_section(d),
+        sections = [*before, identify.model_section(d),
                     *identify.json_only_sections(d, why or "no recording")]
     try:
         g = analyse_json(d).to_dict()
@@ -164,6 +166,39 @@ def report_identify(d: dict[str, Any], json_path: Path, out_dir: str | Path) -> 
             rec = read_recording(path).recording
         sink.tick()
         return _identify(d, rec, sink, (), json_path.name, why)
+    finally:
+        sink.close()
+
+
+def report_summary(d: Mapping[str, Any], out_dir: str | Path) -> ReportResult:
+    """A run summary held in memory (``run --report``): written beside the page as
+    ``run.json``, then reported as :func:`report_run` does."""
+    out = _prepare(out_dir)
+    path = _dump(d, out / "run.json")
+    if not isinstance(d.get("last_model"), dict):
+        sink = Sink(out, 1)
+        try:
+            from . import run
+
+            return _finish(sink, "pmsm-sysid report: live run", run.sections(d, sink), "run",
+                           "no model was fitted", extra=(path,))
+        finally:
+            sink.close()
+    return report_run(d, path, out)
+
+
+def report_run(d: Mapping[str, Any], json_path: Path, out_dir: str | Path) -> ReportResult:
+    """A ``run --json`` summary: the run over time, then its last model."""
+    from . import run
+
+    out = _prepare(out_dir)
+    sink = Sink(out, 6 + FREQ_FIGURES)
+    try:
+        before = tuple(run.sections(d, sink))
+        model = dict(d["last_model"])
+        model.pop("source", None)
+        return _identify(model, None, sink, (), json_path.name,
+                         "a live run keeps no recording in its summary", before)
     finally:
         sink.close()
 
@@ -231,8 +266,7 @@ def report_json(path: str | Path, out_dir: str | Path) -> ReportResult:
     if kind == "diagnose":
         return report_diagnose(d, p, out_dir)
     if kind == "run":
-        d = dict(d["last_model"])
-        d.pop("source", None)
+        return report_run(d, p, out_dir)
     return report_identify(d, p, out_dir)
 
 

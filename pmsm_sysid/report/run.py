@@ -1,0 +1,59 @@
+"""Report sections of a live run (the ``run --json`` summary): the run in numbers, and the
+models over time from its window-by-window ``history`` (:mod:`pmsm_sysid.plots.history`)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from .html import Block, Facts, Note, Section, Table
+from .sink import Sink
+
+
+def _n(x: Any, fmt: str = "{:.3g}") -> str:
+    return "n/a" if x is None else fmt.format(x)
+
+
+def facts(d: Mapping[str, Any]) -> Facts:
+    return Facts((
+        ("nodes", ", ".join(d.get("nodes") or []) or "n/a"),
+        ("clock", str(d.get("clock", "n/a"))),
+        ("samples", f"received {_n(d.get('samples_received'), '{}')}, dropped "
+                    f"{_n(d.get('samples_dropped'), '{}')}, missing "
+                    f"{_n(d.get('samples_missing'), '{}')}"),
+        ("windows", f"fitted {_n(d.get('windows_fitted'), '{}')}, skipped "
+                    f"{_n(d.get('windows_skipped'), '{}')}, failed "
+                    f"{_n(d.get('windows_failed'), '{}')}"),
+        ("fit latency", f"median {_n(d.get('fit_latency_p50_ms'))} ms, 99th percentile "
+                        f"{_n(d.get('fit_latency_p99_ms'))} ms"),
+        ("change events", str(len(d.get("change_events") or []))),
+    ))
+
+
+def events_table(hist: Mapping[str, Any]) -> Table:
+    t0 = min((r["t"] for rows in hist["outputs"].values() for r in rows
+              if r.get("t") is not None), default=0.0)
+    rows = tuple((str(e.get("output")), _n(None if e.get("t") is None else e["t"] - t0,
+                                           "{:.1f}"), ", ".join(e.get("reasons") or []))
+                 for e in hist.get("events") or [])
+    return Table("Change events (time since the first window, s)",
+                 ("output", "time (s)", "what moved"), rows)
+
+
+def sections(d: Mapping[str, Any], sink: Sink) -> list[Section]:
+    """The run in numbers and, when the summary holds a history, its figures over time."""
+    from ..plots.history import figures
+
+    hist = d.get("history")
+    blocks: list[Block] = [facts(d)]
+    if not hist or not any(hist.get("outputs", {}).values()):
+        blocks.append(Note("this summary holds no window-by-window history (written by an "
+                           "older version, or no identification ran): only the last model is "
+                           "shown"))
+        return [Section("Live run", tuple(blocks))]
+    stride = max((hist.get("stride") or {}).values(), default=1)
+    if stride > 1:
+        blocks.append(Note(f"long run: the history keeps every {stride}th window"))
+    images = [sink.figure(p) for p in figures(hist)]
+    return [Section("Live run", tuple(blocks)),
+            Section("Live run: models over time", (*images, events_table(hist)))]
