@@ -207,11 +207,15 @@ def build_pipeline(
     identifier_params: Mapping[str, Any] | None = None,
     sim_params: Mapping[str, Any] | None = None, gfrf_params: Mapping[str, Any] | None = None,
     context: Context | None = None, domain_id: int | None = None, wait_s: float = 0.0,
+    ros_args: Sequence[str] | None = None,
 ) -> Iterator[Pipeline]:
     """Create ``nodes`` in one process and yield the :class:`Pipeline` (see module doc).
 
     ``wait_s``: with the sim node but no identifier here, wait up to that long for another
     process to subscribe to the input topics before the sim starts (0 = start at once).
+    ``ros_args``: ROS arguments (``--ros-args --params-file F -p name:=value -r a:=b``) for
+    the private context (:mod:`.rosargs`); not with a caller's ``context``, whose own
+    arguments apply. The keyword arguments here win over them.
     """
     from .rosutil import check_namespace, ros_session
 
@@ -224,7 +228,10 @@ def build_pipeline(
             "clock": clock, "rate": rate if clock == "sim" else 1.0,
             "identifier_params": identifier_params, "sim_params": sim_params,
             "gfrf_params": gfrf_params}
-    with _context(context, domain_id, ros_session) as (ctx, executor):
+    if ros_args and context is not None:
+        raise PmsmSysidError("ros_args apply to a context this pipeline creates, not to a "
+                             "given one (pass them to rclpy.init of that context)")
+    with _context(context, domain_id, ros_session, ros_args, namespace) as (ctx, executor):
         made: dict[str, Any] = {}
         pipe = Pipeline(ctx, executor, made, clock)
         try:
@@ -249,10 +256,13 @@ def build_pipeline(
 
 
 @contextmanager
-def _context(context: Context | None, domain_id: int | None,
-             session: Any) -> Iterator[tuple[Context, SingleThreadedExecutor]]:
+def _context(context: Context | None, domain_id: int | None, session: Any,
+             ros_args: Sequence[str] | None = None, namespace: str = DEFAULT_NAMESPACE,
+             ) -> Iterator[tuple[Context, SingleThreadedExecutor]]:
     if context is None:
-        with session(domain_id) as s:
+        from .rosargs import prepared
+
+        with prepared(ros_args or [], namespace) as args, session(domain_id, args) as s:
             yield s.context, s.executor
         return
     executor = SingleThreadedExecutor(context=context)

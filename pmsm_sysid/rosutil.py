@@ -17,7 +17,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from types import FrameType
@@ -116,17 +116,23 @@ class RosSession:
 
 
 @contextmanager
-def ros_session(domain_id: int | None = None) -> Iterator[RosSession]:
+def ros_session(domain_id: int | None = None,
+                ros_args: Sequence[str] | None = None) -> Iterator[RosSession]:
     """Private rclpy Context + SingleThreadedExecutor, shut down in the safe order.
 
-    ``domain_id`` defaults to ``ROS_DOMAIN_ID`` from the environment. No rclpy signal
-    handlers are installed (combine with :func:`stop_on_signals` in a verb).
+    ``domain_id`` defaults to ``ROS_DOMAIN_ID`` from the environment. ``ros_args``: ROS
+    command-line arguments from ``--ros-args`` on (params files, ``-p``, ``-r``), parsed by
+    rclpy for every node of the context; the process's own ``sys.argv`` is never parsed. No
+    rclpy signal handlers are installed (combine with :func:`stop_on_signals` in a verb).
     """
     domain = env_domain_id() if domain_id is None else domain_id
     ctx = Context()
     try:
-        rclpy.init(context=ctx, domain_id=domain)
+        rclpy.init(context=ctx, domain_id=domain, args=["pmsm-sysid", *(ros_args or [])])
     except Exception as exc:  # rclpy raises RCLError subclasses of RuntimeError
+        if ros_args:
+            detail = str(exc).split(", at ")[0]
+            raise PmsmSysidError(f"--ros-args not accepted by ROS 2: {detail}") from exc
         raise PmsmSysidError(f"cannot initialise ROS 2 (domain {domain}): {exc}") from exc
     executor = SingleThreadedExecutor(context=ctx)
     session = RosSession(ctx, executor)

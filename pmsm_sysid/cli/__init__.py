@@ -33,7 +33,17 @@ def _module_name(verb: str) -> str:
     return "pmsm_sysid.cli." + verb.replace("-", "_")
 
 
+ROS_ARGS_HELP = """\
+ROS arguments: after the options above, --ros-args as for any ROS 2 executable, e.g.
+  --ros-args --params-file params.yaml -p hop:=100 -r __ns:=/axis2
+(a params-file section 'pmsm_identifier:' names that node in the pipeline's namespace;
+'/**:' names every node; the options above win over --ros-args)
+"""
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from ..rosargs import ROS_VERBS
+
     parser = _Parser(prog="pmsm-sysid", description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=_Parser)
     sub.required = True
@@ -44,6 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
             continue  # verb not built yet in this checkout
         p = sub.add_parser(verb, help=mod.HELP, description=mod.HELP)
         mod.add_arguments(p)
+        if verb in ROS_VERBS:
+            p.formatter_class = argparse.RawDescriptionHelpFormatter
+            p.epilog = (p.epilog or "") + ROS_ARGS_HELP
         p.set_defaults(_run=mod.run)
     return parser
 
@@ -58,10 +71,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     for var in BLAS_THREAD_VARS:  # before any verb imports numpy
         os.environ.setdefault(var, "1")
     from ..core.errors import PmsmSysidError
+    from ..rosargs import ROS_VERBS, check_ros_args, split_ros_args
 
     parser = build_parser()
-    args = parser.parse_args(argv)
+    own, ros_args = split_ros_args(sys.argv[1:] if argv is None else argv)
+    args = parser.parse_args(own)
+    if ros_args and args.verb not in ROS_VERBS:
+        parser.exit(2, f"pmsm-sysid {args.verb}: error: --ros-args applies to the ROS verbs "
+                       f"only ({', '.join(ROS_VERBS)})\n")
+    args.ros_args = ros_args
     try:
+        check_ros_args(ros_args)  # before any work: a missing params file is bad input
         return int(args._run(args))
     except PmsmSysidError as exc:
         print(f"pmsm-sysid {args.verb}: error: {exc}", file=sys.stderr)

@@ -69,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.live import Live
 
     from ..nodes.monitor import MonitorNode
+    from ..rosargs import prepared
     from ..rosutil import check_namespace, ros_session, stop_on_signals
     from .common import write_json
     from .monitor_view import view
@@ -78,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
     show = args.json != "-"
     con = console()
     live = show and not args.once and con.is_terminal
-    with ros_session() as session, stop_on_signals(session.stop):
+    with prepared(getattr(args, "ros_args", None) or [], namespace) as ros_args, \
+            ros_session(ros_args=ros_args) as session, stop_on_signals(session.stop):
         node = session.add(MonitorNode(context=session.context, namespace=namespace))
         start = time.monotonic()
         snap = node.snapshot()

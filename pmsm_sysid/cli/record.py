@@ -56,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
     from ..bagio import BagRecorder
     from ..core.errors import PmsmSysidError
     from ..nodes.recorder import RecorderNode
+    from ..rosargs import prepared
     from ..rosutil import check_namespace, ros_session, stop_on_signals
     from .common import replace_bag_dir, write_json
 
@@ -67,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     replace_bag_dir(out, args.force)
     info = sys.stderr if args.json == "-" else sys.stdout
-    with ros_session() as session, stop_on_signals(session.stop), \
+    with prepared(getattr(args, "ros_args", None) or [], namespace) as ros_args, \
+            ros_session(ros_args=ros_args) as session, stop_on_signals(session.stop), \
             BagRecorder(out, storage=args.storage) as recorder:
         node = session.add(RecorderNode(recorder, context=session.context,
                                         namespace=namespace, topics=args.topics,

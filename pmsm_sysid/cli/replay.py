@@ -51,13 +51,15 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from ..nodes.replayer import ReplayerNode
+    from ..rosargs import prepared
     from ..rosutil import check_namespace, ros_session, stop_on_signals
     from .common import write_json
 
     rate = _check(args)
     namespace = None if args.namespace is None else check_namespace(args.namespace)
     info = sys.stderr if args.json == "-" else sys.stdout
-    with ros_session() as session, stop_on_signals(session.stop):
+    with prepared(getattr(args, "ros_args", None) or [], (namespace or "/")) as ros_args, \
+            ros_session(ros_args=ros_args) as session, stop_on_signals(session.stop):
         node = session.add(ReplayerNode(
             args.bag, context=session.context, rate=rate, loops=args.loop,
             namespace=namespace, wait_s=args.wait, burst=args.burst,

@@ -142,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
     with build_pipeline(nodes, plant=plant, excitation=args.excitation, seed=args.seed,
                         clock=args.clock, rate=args.rate, namespace=args.namespace,
                         record=args.record, wait_s=args.wait,
+                        ros_args=getattr(args, "ros_args", None),
                         identifier_params=params["identifier"],
                         sim_params=params["sim"], gfrf_params=params["gfrf"]) as pipe, \
             stop_on_signals(pipe.stop):

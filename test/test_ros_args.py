@@ -1,0 +1,97 @@
+"""``--ros-args`` after a ROS verb's options: params files, ``-p`` and remaps go to rclpy."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pmsm_sysid.core.errors import PmsmSysidError
+from pmsm_sysid.rosargs import check_ros_args, prepared, split_ros_args
+
+CLI = [sys.executable, "-m", "pmsm_sysid.cli"]
+RUN = [*CLI, "run", "--nodes", "sim,identifier", "--outputs", "speed", "--clock", "sim",
+       "--duration", "4", "--json", "-"]
+
+
+def _env(domain: int, tmp: Path) -> dict[str, str]:
+    return dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+                ROS_LOG_DIR=str(tmp / "ros_log"))
+
+
+def test_split_keeps_the_verbs_options_and_hands_the_rest_to_ros() -> None:
+    own, ros = split_ros_args(["run", "--duration", "3", "--ros-args", "-p", "hop:=5",
+                               "--params-file", "p.yaml"])
+    assert own == ["run", "--duration", "3"]
+    assert ros == ["--ros-args", "-p", "hop:=5", "--params-file", "p.yaml"]
+    own, ros = split_ros_args(["run", "--ros-args", "-r", "__ns:=/b", "--", "--json", "-"])
+    assert own == ["run", "--json", "-"] and ros == ["--ros-args", "-r", "__ns:=/b"]
+    assert split_ros_args(["run", "--json", "-"]) == (["run", "--json", "-"], [])
+
+
+def test_bare_node_sections_name_the_node_in_the_pipelines_namespace(tmp_path: Path) -> None:
+    import yaml
+
+    f = tmp_path / "p.yaml"
+    f.write_text("pmsm_identifier:\n  ros__parameters:\n    hop: 125\n"
+                 "/**:\n  ros__parameters:\n    queue_size: 3\n")
+    with prepared(["--ros-args", "--params-file", str(f)], "/axis2") as args:
+        data = yaml.safe_load(Path(args[2]).read_text())
+        assert data == {"/axis2/pmsm_identifier": {"ros__parameters": {"hop": 125}},
+                        "/**": {"ros__parameters": {"queue_size": 3}}}
+    with prepared(["--ros-args", "-r", "__ns:=/c", "--params-file", str(f)], "/axis2") as args:
+        assert "/c/pmsm_identifier" in yaml.safe_load(Path(args[4]).read_text())
+    g = tmp_path / "q.yaml"
+    g.write_text("/**/pmsm_identifier:\n  ros__parameters:\n    hop: 125\n")
+    with prepared(["--ros-args", "--params-file", str(g)], "/axis2") as args:
+        assert args[2] == str(g)  # nothing to move: the file is given to ROS as it is
+
+
+@pytest.mark.parametrize("args,match", [
+    (["--ros-args", "--params-file", "/no/such.yaml"], "no such file"),
+    (["--ros-args", "-p", "hop"], "name:=value"),
+    (["--ros-args", "-p"], "needs a value"),
+])
+def test_bad_ros_args_are_found_before_any_work(args: list[str], match: str) -> None:
+    with pytest.raises(PmsmSysidError, match=match):
+        check_ros_args(args)
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_params_file_sets_the_identifiers_hop(ros_env: int, tmp_path: Path) -> None:
+    """The same 4 s of data: hop 250 (default) fits 4 windows, hop 125 from the params file
+    8, and ``-p`` after it wins (hop 500: 2); the verb's own --hop wins over both."""
+    params = tmp_path / "params.yaml"
+    params.write_text("pmsm_identifier:\n  ros__parameters:\n    hop: 125\n")
+    env = _env(ros_env, tmp_path)
+
+    def fitted(*extra: str) -> tuple[int, int]:
+        proc = subprocess.run([*RUN, *extra], env=env, capture_output=True, text=True,
+                              timeout=300)
+        assert proc.returncode == 0, proc.stderr
+        s = json.loads(proc.stdout)
+        assert s["samples_received"] == 2000 and s["windows_skipped"] == 0
+        return s["windows_fitted"], s["windows_due"]
+
+    assert fitted() == (4, 4)
+    assert fitted("--ros-args", "--params-file", str(params)) == (8, 8)
+    assert fitted("--ros-args", "--params-file", str(params), "-p", "hop:=500") == (2, 2)
+    assert fitted("--hop", "250", "--ros-args", "--params-file", str(params)) == (4, 4)
+
+
+@pytest.mark.ros
+def test_ros_args_errors_are_one_line_and_exit_2(ros_env: int, tmp_path: Path) -> None:
+    env = _env(ros_env, tmp_path)
+    for argv, match in (
+            ([*CLI, "run", "--ros-args", "--params-file", str(tmp_path / "none.yaml")],
+             "no such file"),
+            ([*CLI, "monitor", "--once", "--ros-args", "-r", "nonsense"], "name:=value"),
+            ([*CLI, "identify", "x.bag", "--ros-args", "-p", "a:=1"], "ROS verbs only")):
+        proc = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=120)
+        lines = proc.stderr.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1 and match in lines[0], proc.stderr
