@@ -362,6 +362,8 @@ def pipeline_summary(pipe: Pipeline) -> dict[str, Any]:
                           else list(col.changes) if col is not None else []),
         "errors": list(ident.errors) if ident is not None else [],
         "history": col.history.to_dict() if col is not None else None,
+        "inputs": ident.input_report().to_dict() if ident is not None else None,
+        "speed_derived": ident.engine.aligner.speed_derived if ident is not None else None,
     })
     if gfrf is not None:
         g = gfrf.summary()

@@ -26,7 +26,7 @@ MSG_PACKAGE = "pmsm_sysid/msg"
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 CUSTOM_PREFIX = "pmsm_sysid."
 SPEED_DERIVED_NOTE = (
-    "absent: derived on reading from position by central differences (numpy.gradient)"
+    "absent: derived on reading from position by the causal backward difference"
 )
 
 # rosbag2 writes "infinite" durations like this in metadata.yaml (Jazzy).

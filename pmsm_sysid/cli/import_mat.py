@@ -4,7 +4,7 @@ Keys: ``t`` (s), ``qm`` measured position (m), ``qg`` reference position (m), ``
 controller output (V), ``gtau`` (N/V), ``kp``, ``kv``. Written: ``<ns>/thrust`` =
 ``gtau * vir``, ``<ns>/position`` = ``qm``, ``<ns>/reference`` = ``qg`` (PointStamped), all
 stamped with ``t``. The rig has no speed sensor, so no speed topic is written: readers derive
-speed from position (central differences) and mark it derived; the bag's ``custom_data``
+speed from position (causal backward difference) and mark it derived; the bag's ``custom_data``
 says so (``pmsm_sysid.speed``).
 """
 

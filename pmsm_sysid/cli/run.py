@@ -116,6 +116,11 @@ def _headline(s: dict[str, Any]) -> str:
         parts.append(f"received {s['samples_received']}, dropped {s['samples_dropped']}, "
                      f"missing {s['samples_missing']}; windows fitted {s['windows_fitted']}, "
                      f"skipped {s['windows_skipped']}")
+    inputs = s.get("inputs") or {}
+    if inputs.get("problem"):
+        parts.append(inputs["problem"])
+    elif s.get("speed_derived"):
+        parts.append("speed derived from position")
     m, v, r = s["last_model"], s["last_validation"], s["last_ridges"]
     if m:
         parts.append(f"last {m['output']} model {len(m['terms'])} terms")

@@ -20,8 +20,9 @@ by averaging the steps near it). Nothing is invented:
 So, with k the number of streams present (2 without speed, else 3):
 ``n_thrust + n_speed + n_position == k*n_aligned + n_nonfinite + n_duplicates + n_unaligned``.
 
-A missing speed stream is derived from position (:func:`~.signals.derive_speed`, central
-differences) and marked ``speed_derived``. Steps longer than 1.5 periods count as gaps.
+A missing speed stream is derived from position (:func:`~.signals.derive_speed`, the causal
+backward difference the live identifier uses too) and marked ``speed_derived``. Steps longer
+than 1.5 periods count as gaps.
 """
 
 from __future__ import annotations

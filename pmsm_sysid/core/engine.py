@@ -1,6 +1,7 @@
 """The online identification engine: messages in, window results out (no ROS).
 
-``push`` (the subscription path) aligns messages into samples (:class:`StampAligner`), stores
+``push`` (the subscription path) aligns messages into samples (:class:`.inputs.InputAligner`:
+the signals present, speed derived from position when it is not published), stores
 them in the window ring (:class:`WindowScheduler`) and, every ``hop`` samples, hands a copy of
 the latest window to the fitting thread through a latest-wins queue (:mod:`.fitqueue`). The
 thread runs ``process(window)`` (fits, validation, change detection: :mod:`.tracker`) and
@@ -22,14 +23,15 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Generic, TypeVar
 
 import numpy as np
 
 from .errors import DataError
 from .fitqueue import FitWorker, LatestQueue
-from .online import SIGNALS, Sample, StampAligner, Window, WindowScheduler
+from .inputs import SPEED_SOURCES, InputAligner
+from .online import SIGNALS, Sample, Window, WindowScheduler
 
 R = TypeVar("R")
 
@@ -45,6 +47,7 @@ class EngineConfig:
     sample_rate_hz: float = 0.0  # 0 = read from the stamps
     tolerance_s: float = 0.0  # 0 = half a sample period
     max_results: int = 256
+    speed_source: str = "auto"  # measured, derived from position, or auto (what arrives)
 
     def __post_init__(self) -> None:
         if self.window < 2 or self.hop < 1 or self.history < 0:
@@ -56,6 +59,9 @@ class EngineConfig:
                             f"{self.sample_rate_hz}")
         if not (math.isfinite(self.tolerance_s) and self.tolerance_s >= 0):
             raise DataError(f"tolerance_s must be >= 0, got {self.tolerance_s}")
+        if self.speed_source not in SPEED_SOURCES:
+            raise DataError(f"speed_source must be one of {', '.join(SPEED_SOURCES)}, got "
+                            f"'{self.speed_source}'")
 
 
 @dataclass(frozen=True)
@@ -99,13 +105,14 @@ class OnlineEngine(Generic[R]):
     """Aligner + window ring + latest-wins queue + fitting thread around ``process``."""
 
     def __init__(self, config: EngineConfig, process: Callable[[Window], R],
-                 signals: Sequence[str] = SIGNALS) -> None:
+                 signals: Sequence[str] = SIGNALS,
+                 speed_expected: Callable[[], bool] | None = None) -> None:
         self.config = config
         fs = config.sample_rate_hz
-        self.aligner = StampAligner(
-            signals,
+        self.aligner = InputAligner(
+            signals, config.speed_source,
             tolerance_ns=round(config.tolerance_s * 1e9) if config.tolerance_s else None,
-            period_ns=round(1e9 / fs) if fs else None)
+            period_ns=round(1e9 / fs) if fs else None, speed_expected=speed_expected)
         self.scheduler = WindowScheduler(config.window, config.hop, config.history,
                                          len(signals), signals)
         self._queue: LatestQueue[Window] = LatestQueue(config.queue_size)
@@ -148,6 +155,8 @@ class OnlineEngine(Generic[R]):
                 continue
             window = self.scheduler.push(s)
             if window is not None:
+                if self.aligner.speed_derived:
+                    window = replace(window, speed_derived=True)
                 self._queue.put(window)
 
     # -- results ----------------------------------------------------------------------

@@ -245,6 +245,7 @@ class IdentifyResult:
     validate: tuple[int, int] | None
     excitation: dict[str, Any] | None
     timing_ms: dict[str, float]
+    speed_derived: bool = False  # the speed signal was derived from position
 
     @property
     def model(self) -> NarxModel:
@@ -255,6 +256,7 @@ class IdentifyResult:
         check = self.fit.data_check
         return {
             "input": self.input, "output": self.output, "sample_rate_hz": self.sample_rate_hz,
+            "speed_derived": self.speed_derived and "speed" in (self.input, self.output),
             "structure": {"ny": st.ny, "nu": st.nu, "degree": st.degree, "delay": st.delay,
                           "constant": st.constant, "n_candidates": self.fit.n_candidates},
             "method": self.fit.method, "criterion": self.fit.criterion,
@@ -343,4 +345,5 @@ def identify_recording(
               "total": 1e3 * (time.perf_counter() - t0)}
     return IdentifyResult(input=input, output=output, sample_rate_hz=fs, fit=fit,
                           validation=report, estimate=estimate, validate=validate,
-                          excitation=excitation, timing_ms=timing)
+                          excitation=excitation, timing_ms=timing,
+                          speed_derived=bool(getattr(rec, "speed_derived", False)))

@@ -356,6 +356,7 @@ class Window:
     values: FloatArray
     signals: tuple[str, ...] = SIGNALS
     due_monotonic: float = field(default=0.0, compare=False)
+    speed_derived: bool = False  # speed was derived from position (no speed messages)
 
     @property
     def start_stamp(self) -> float:
@@ -376,7 +377,7 @@ class Window:
         cols = {s: np.ascontiguousarray(self.values[h:, i]) for i, s in enumerate(self.signals)}
         return Recording(t=t, thrust=cols["thrust"], speed=cols["speed"],
                          position=cols["position"], sample_rate_hz=sample_rate_hz,
-                         source=f"window {self.seq}")
+                         speed_derived=self.speed_derived, source=f"window {self.seq}")
 
 
 class WindowScheduler:

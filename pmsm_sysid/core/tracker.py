@@ -179,7 +179,8 @@ class _OutputTrack:
 def window_info(w: Window, fs: float) -> dict[str, Any]:
     return {"seq": w.seq, "start_stamp": w.start_stamp, "end_stamp": w.end_stamp,
             "start_index": w.start_index, "stop_index": w.stop_index,
-            "n_samples": w.stop_index - w.start_index, "sample_rate_hz": fs}
+            "n_samples": w.stop_index - w.start_index, "sample_rate_hz": fs,
+            "speed_derived": w.speed_derived}
 
 
 def window_rate(w: Window) -> float:
@@ -268,7 +269,8 @@ class WindowTracker:
         result = IdentifyResult(
             input=cfg.input, output=cfg.output, sample_rate_hz=fs, fit=fit, validation=report,
             estimate=(info["start_index"], info["stop_index"]), validate=None,
-            excitation=excitation_summary(u[lag:], fs).to_dict(), timing_ms=fit.timing_ms)
+            excitation=excitation_summary(u[lag:], fs).to_dict(), timing_ms=fit.timing_ms,
+            speed_derived=bool(info.get("speed_derived")))
         out = {**result.to_dict(), "window": info, "model_id": f"{cfg.output}/{info['seq']}",
                "fit_time_ms": 1e3 * (time.perf_counter() - t0)}
         return out, fit.model

@@ -36,6 +36,7 @@ from ..bagio.cdr import decode_stamped
 from ..core.engine import EngineConfig, OnlineEngine, WindowError
 from ..core.errors import DataError
 from ..core.gfrf_analysis import json_safe
+from ..core.inputs import InputReport, describe_inputs
 from ..core.tracker import WindowResult, WindowTracker, tracker_config
 from ..rosutil import data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
 from ..topics import CHANGE, DEFAULT_NAMESPACE, INPUT_TYPES, MODEL, VALIDATION
@@ -53,6 +54,7 @@ DEFAULTS: dict[str, Any] = {
     "position.terms": 15, "min_r2": 0.9, "change.s_confirm": 7.0,
     "change.baseline": 24, "change.warmup": 8, "change.min_r2": 0.99,
     "publish_period_s": 0.05, "stale_after_s": 1.0,
+    "speed_source": "auto", "inputs_report_s": 3.0,
 }
 
 
@@ -80,8 +82,9 @@ class IdentifierNode(Node):
             EngineConfig(window=int(p["window"]), hop=int(p["hop"]),
                          history=self.tracker.history, queue_size=int(p["queue_size"]),
                          sample_rate_hz=float(p["sample_rate_hz"]),
-                         tolerance_s=float(p["tolerance_s"])),
-            self.tracker.process)
+                         tolerance_s=float(p["tolerance_s"]),
+                         speed_source=str(p["speed_source"])),
+            self.tracker.process, speed_expected=self._speed_published)
         self.last: dict[str, Any] = {"models": {}, "validation": {}, "changes": []}
         self.models_published = 0
         self.errors: list[str] = []
@@ -91,6 +94,9 @@ class IdentifierNode(Node):
         self._model_pub = self.create_publisher(String, MODEL, 50)
         self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION, 50)
         self._change_pub = self.create_publisher(DiagnosticArray, CHANGE, 50)
+        self._input_topics = self._layout(p)
+        self._started = time.monotonic()
+        self._inputs_logged: tuple[Any, ...] | None = None
         self._subscribe(p)
         self._timer = self.create_timer(float(p["publish_period_s"]), self.publish_results)
         self.engine.start()
@@ -109,6 +115,19 @@ class IdentifierNode(Node):
         else:
             raise DataError(f"input_layout must be 'topics' or 'joint_state', got "
                             f"'{p['input_layout']}'")
+
+    def _layout(self, p: dict[str, Any]) -> dict[str, str]:
+        """signal -> the full name of the topic it comes from."""
+        if p["input_layout"] == "joint_state":
+            return dict.fromkeys(INPUT_TYPES,
+                                 self.resolve_topic_name(str(p["joint_state_topic"])))
+        return {sig: self.resolve_topic_name(sig) for sig in INPUT_TYPES}
+
+    def _speed_published(self) -> bool:
+        """Someone publishes the speed topic (then its messages are worth waiting for)."""
+        if self.params["input_layout"] != "topics":
+            return False
+        return self.count_publishers(self._input_topics["speed"]) > 0
 
     def _on_raw(self, sig: str) -> Any:
         def callback(data: bytes) -> None:
@@ -145,7 +164,9 @@ class IdentifierNode(Node):
         self._input_seen()
         try:
             i = list(msg.name).index(self.params["joint_name"])
-            values = (msg.effort[i], msg.velocity[i], msg.position[i])
+            # a position-only joint publishes no velocity: speed is then derived
+            speed = msg.velocity[i] if len(msg.velocity) > i else float("nan")
+            values = (msg.effort[i], speed, msg.position[i])
         except (ValueError, IndexError):
             self.engine.aligner.count_unaligned(3)  # no such joint, or a short array
             return
@@ -178,9 +199,30 @@ class IdentifierNode(Node):
         arr.header.stamp = self.get_clock().now().to_msg()
         self._val_pub.publish(arr)
 
+    def input_report(self) -> InputReport:
+        """Which input topics were expected, which arrived (with rates), which never came."""
+        a = self.engine.aligner
+        return describe_inputs(self._input_topics, a.counts, a.mode, a.samples_emitted)
+
+    def _check_inputs(self) -> None:
+        """Log the account of the inputs once ``inputs_report_s`` have passed, and again
+        whenever what arrived (or what is wrong) changes."""
+        if time.monotonic() - self._started < float(self.params["inputs_report_s"]):
+            return
+        rep = self.input_report()
+        key = (tuple(rep.arrived), rep.speed, rep.problem, rep.samples > 0)
+        if key != self._inputs_logged:
+            self._inputs_logged = key
+            log = self.get_logger()
+            if rep.problem:
+                log.warning(rep.line())  # type: ignore[no-untyped-call]
+            else:
+                log.info(rep.line())  # type: ignore[no-untyped-call]
+
     def publish_results(self) -> None:
         """Publish what the fitting thread finished (timer callback; also call at shutdown)."""
         self._check_stale()
+        self._check_inputs()
         for r in self.engine.drain():
             if isinstance(r, WindowError):
                 self._note_error(f"window {r.seq}: {r.error}")
@@ -253,7 +295,8 @@ class IdentifierNode(Node):
     # ------------------------------------------------------------------ summary
     def summary(self) -> dict[str, Any]:
         """Counters and the latest results (the ``run --json`` summary's identifier part)."""
-        return {**self.engine.stats.to_dict(), "input_stale": self.stale,
+        return {**self.engine.stats.to_dict(), "inputs": self.input_report().to_dict(),
+                "speed_derived": self.engine.aligner.speed_derived, "input_stale": self.stale,
                 "stale_events": self.stale_events, "last_input_age_s": self.input_age_s(),
                 "models": dict(self.last["models"]),
                 "validation": dict(self.last["validation"]),
