@@ -47,6 +47,11 @@ def _check(args: argparse.Namespace) -> float:
     return rate
 
 
+def _topic_line(topic: str, messages: int, subscribers: int) -> str:
+    who = {0: "no subscriber", 1: "1 subscriber"}.get(subscribers, f"{subscribers} subscribers")
+    return f"{topic} {messages} to {who}"
+
+
 def run(args: argparse.Namespace) -> int:
     import time
 
@@ -79,10 +84,14 @@ def run(args: argparse.Namespace) -> int:
         seconds = time.monotonic() - start
         stats = node.stats
     total = sum(stats.counts.values())
+    listeners = {t: stats.listeners.get(t, 0) for t in sorted(node.remap.values())}
     print(f"replayed {args.bag}: {total} messages in {stats.passes} pass(es), {seconds:.1f} s "
-          f"({', '.join(f'{t} {n}' for t, n in sorted(stats.counts.items()))})",
+          f"({', '.join(_topic_line(t, stats.counts.get(t, 0), n) for t, n in listeners.items())})",
           file=info, flush=True)
+    if not any(listeners.get(t) for t in node.wait_for):
+        print(f"replay: nobody listened: no subscriber on {', '.join(node.wait_for)} while "
+              "replaying", file=sys.stderr)
     write_json({"bag": str(args.bag), "messages": total, "topics": dict(stats.counts),
-                "passes": stats.passes, "seconds": seconds, "matched": stats.matched,
-                "interrupted": not node.finished}, args.json)
+                "subscribers": listeners, "passes": stats.passes, "seconds": seconds,
+                "matched": stats.matched, "interrupted": not node.finished}, args.json)
     return 0

@@ -213,11 +213,11 @@ class IdentifierNode(Node):
         key = (tuple(rep.arrived), rep.speed, rep.problem, rep.samples > 0)
         if key != self._inputs_logged:
             self._inputs_logged = key
-            log = self.get_logger()
+            log = self.get_logger()  # type: ignore[no-untyped-call]
             if rep.problem:
-                log.warning(rep.line())  # type: ignore[no-untyped-call]
+                log.warning(rep.line())
             else:
-                log.info(rep.line())  # type: ignore[no-untyped-call]
+                log.info(rep.line())
 
     def publish_results(self) -> None:
         """Publish what the fitting thread finished (timer callback; also call at shutdown)."""

@@ -134,9 +134,11 @@ class _Pass:
 
 @dataclass
 class ReplayStats:
-    """What was published (per published topic), in how many passes."""
+    """What was published (per published topic), to how many subscribers, in how many
+    passes."""
 
     counts: Counter[str] = field(default_factory=Counter)
+    listeners: Counter[str] = field(default_factory=Counter)  # most subscribers at once
     passes: int = 0
     waited_s: float = 0.0
     matched: bool = False
@@ -164,10 +166,10 @@ class ReplayerNode(Node):
         self.headers = {t: has_header(ty) for t, ty in self.topics.items()}
         self.offset_ns = loop_offset_ns(self.path, self.headers) if loops != 1 else 0
         self.matched: dict[str, int] = {}
+        self.stats = ReplayStats()
         self._pubs = {t: self._publisher(t, ty) for t, ty in self.topics.items()}
         inputs = [self.remap[t] for t, ty in self.topics.items() if is_input(t, ty)]
         self.wait_for = inputs or list(self.remap.values())
-        self.stats = ReplayStats()
         self.finished = False
         self._phase, self._phase_t = "wait", time.monotonic()
         self._pass: _Pass | None = None
@@ -180,6 +182,7 @@ class ReplayerNode(Node):
 
         def on_matched(info: Any) -> None:
             self.matched[out] = int(info.current_count)
+            self.stats.listeners[out] = max(self.stats.listeners[out], int(info.current_count))
 
         return self.create_publisher(message_class(msgtype), out, data_qos(),
                                      event_callbacks=PublisherEventCallbacks(matched=on_matched))

@@ -1,0 +1,135 @@
+"""A real recording end to end: the EMPS rig (../shared; 1 kHz, position only, closed loop).
+
+The README's walkthrough as a test: ``import-mat``, ``replay`` (its own process) into the
+identifier and GFRF nodes, offline ``identify`` of the same windows, ``diagnose``. The
+recording has no speed topic, so the identifier derives speed from position live, by the
+same causal differentiator the offline readers use; every window it fits (speed and
+position) must be the model ``identify`` finds offline on the same samples: the same terms,
+estimates equal to 1e-9. A slice of the recording keeps the replay short (4 s at its own
+pace); ``diagnose`` reads the whole recording.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import EMPS_MAT
+
+from pmsm_sysid.cli import main
+from pmsm_sysid.core.identify import FitConfig, identify_recording
+from pmsm_sysid.core.model import NarxModel, Structure
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+REPO = Path(__file__).resolve().parents[1]
+START, STOP = 10_000, 14_000  # the slice replayed (samples of the 24841)
+
+
+def _slice(full: Path, out: Path) -> None:
+    from pmsm_sysid.bagio import read_recording, write_recording
+
+    rec = read_recording(full).recording
+    write_recording(out, rec.window(START, STOP))  # speed derived: no speed topic written
+
+
+def _replay_into_pipeline(bag: Path, env: dict[str, str], ctx: Any) -> tuple[Any, ...]:
+    from pmsm_sysid.app import build_pipeline
+
+    n = STOP - START
+    with build_pipeline(["identifier", "gfrf"], context=ctx,
+                        identifier_params={"queue_size": 64},
+                        gfrf_params={"orders": [1], "queue_size": 64}) as pipe:
+        replay = subprocess.Popen(
+            [sys.executable, "-m", "pmsm_sysid.cli", "replay", str(bag), "--wait", "30",
+             "--json", "-"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            deadline = time.monotonic() + 180
+            pipe.run(until=lambda: replay.poll() is not None or time.monotonic() > deadline)
+            pipe.run(until=lambda: pipe.identifier.engine.samples_received >= n
+                     or time.monotonic() > deadline)
+        finally:
+            if replay.poll() is None:
+                replay.kill()
+            out, err = replay.communicate()
+        assert replay.returncode == 0, err
+        pipe.finish()
+        return pipe.summary(), list(pipe.nodes["collector"].model_log), json.loads(out), err
+
+
+def test_emps_walkthrough_live_equals_offline(ros_context: Any, ros_env: int,
+                                              tmp_path: Path) -> None:
+    from pmsm_sysid.bagio import read_recording
+
+    assert EMPS_MAT.is_file(), f"{EMPS_MAT} missing"
+    full, part = tmp_path / "emps", tmp_path / "emps_slice"
+    assert main(["import-mat", str(EMPS_MAT), "--out", str(full)]) == 0
+    _slice(full, part)
+    env = {**os.environ, "ROS_DOMAIN_ID": str(ros_env), "ROS_LOG_DIR": str(tmp_path / "log"),
+           "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    s, models, replayed, _ = _replay_into_pipeline(part, env, ros_context)
+
+    # the replay says what it published and that the identifier listened
+    assert replayed["topics"]["/pmsm/position"] == STOP - START
+    assert replayed["subscribers"]["/pmsm/position"] >= 1
+    assert replayed["subscribers"]["/pmsm/thrust"] >= 1
+    # the run says what came and what did not, and that speed is derived
+    assert s["samples_received"] == STOP - START and s["samples_dropped"] == 0
+    assert s["samples_missing"] == 0 and s["windows_skipped"] == 0
+    assert s["speed_derived"] is True
+    ins = s["inputs"]
+    assert ins["missing"] == ["/pmsm/speed"] and ins["problem"] is None
+    assert ins["arrived"]["/pmsm/position"]["rate_hz"] == pytest.approx(1000.0, rel=1e-4)
+
+    rec = read_recording(part).recording
+    assert rec.speed_derived
+    outputs = {m["output"] for m in models}
+    assert outputs == {"speed", "position"}
+    n_windows = len({m["window"]["stop_index"] for m in models})
+    assert n_windows >= 10 and len(models) == 2 * n_windows
+    for m in models:
+        # live indices are on the stamp grid; the offline index of a window is its stamp's
+        a = int(np.searchsorted(rec.t, m["window"]["start_stamp"] - 1e-7))
+        b = a + m["window"]["n_samples"]
+        assert rec.t[b - 1] == pytest.approx(m["window"]["end_stamp"], abs=1e-9)
+        assert m["speed_derived"] is (m["output"] == "speed")
+        st = m["structure"]
+        cfg = FitConfig(structure=Structure(st["ny"], st["nu"], st["degree"], st["delay"]),
+                        method=m["method"])
+        ref = identify_recording(rec, output=m["output"], config=cfg, estimate=(a, b),
+                                 validate=None).to_dict()
+        assert [t["name"] for t in m["terms"]] == [t["name"] for t in ref["terms"]], m["model_id"]
+        got, want = NarxModel.from_dict(m), NarxModel.from_dict(ref)
+        np.testing.assert_allclose(got.estimates, want.estimates, rtol=1e-9, atol=0)
+        assert m["validation"]["estimation"]["r2"] == pytest.approx(
+            ref["validation"]["estimation"]["r2"], rel=1e-9)
+
+    # the identify verb on the last speed window, then diagnose on the whole recording
+    last = max((m for m in models if m["output"] == "speed"),
+               key=lambda m: m["window"]["end_stamp"])
+    a = int(np.searchsorted(rec.t, last["window"]["start_stamp"] - 1e-7))
+    out = tmp_path / "identify.json"
+    proc = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "identify", str(part),
+                           "--estimate", f"{a}:{a + 1000}", "--no-validate", "--method",
+                           last["method"], "--json", str(out)],
+                          env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    cli = json.loads(out.read_text())
+    assert cli["speed_derived"] is True
+    assert [t["name"] for t in cli["terms"]] == [t["name"] for t in last["terms"]]
+    np.testing.assert_allclose([t["estimate"] for t in cli["terms"]],
+                               [t["estimate"] for t in last["terms"]], rtol=1e-9, atol=0)
+    diag = tmp_path / "diag.json"
+    proc = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "diagnose", "--plant",
+                           str(REPO / "plants" / "emps.yaml"), "--real", str(full), "--json",
+                           str(diag)], env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    named = {e["name"]: e for e in json.loads(diag.read_text())["effects"]}
+    assert named["coulomb_friction"]["params"]["amplitude_n"] == pytest.approx(20.39, rel=0.05)
+    assert named["force_offset"]["params"]["amplitude_n"] == pytest.approx(-3.16, rel=0.10)
