@@ -108,7 +108,8 @@ def derive_speed(t: FloatArray, position: FloatArray) -> FloatArray:
     if not np.all(dt > 0):
         raise DataError("stamps must increase to derive speed from position")
     v = np.empty(len(x), dtype=np.float64)
-    v[1:] = np.diff(x) / dt
+    with np.errstate(over="ignore", invalid="ignore"):  # callers check finiteness
+        v[1:] = np.diff(x) / dt
     v[0] = v[1]
     return v
 
