@@ -78,3 +78,22 @@ def test_a_binary_prbs_lines_are_the_inputs_not_the_plants() -> None:
         line = next(w for w in result.where if w.axis == "frequency")
         assert line.significance < 3.0
     assert np.isfinite(line.details["line_to_local_level"])
+
+
+@pytest.mark.parametrize("kind", ["prbs", "aprbs"])
+def test_one_ms_actuator_lag_with_random_binary_inputs(kind: str) -> None:
+    """A held random input is strongly autocorrelated and the motion answers it at once:
+    that is no feedback. The 1 ms lag is named (not a delay, not a mass/viscous change)."""
+    from pmsm_sysid.core.discrepancy.kinematics import FEEDBACK_Z, feedback_z
+    from pmsm_sysid.core.plant import ThrustLag
+
+    noise = Noise(speed_std=0.001, position_std=2e-6, force_std=0.3)
+    plant = nominal_plant().with_effects(noise=noise, quantisation=QUANT,
+                                         thrust_lag=ThrustLag(0.001))
+    recs = [simulate(plant, make_excitation(kind, N, FS, seed=s), seed=s) for s in (1, 2)]
+    assert feedback_z(recs[0]) < FEEDBACK_Z
+    result = diagnose(nominal_plant(), recs[0], recs[1], FAST)
+    named = {e.name: e for e in result.effects}
+    assert set(named) == {"thrust_lag"}, list(named)
+    assert named["thrust_lag"].params["tau_s"] == pytest.approx(0.001, rel=0.3)
+    assert not result.method["feedback"]["closed_loop"]

@@ -108,9 +108,9 @@ def segments(plant: Plant, real: Recording, validate: Recording | None,
     spec = choose_filter(recs["estimation"].speed, recs["estimation"].sample_rate_hz)
     vspec = spec if recs["validation"].sample_rate_hz == recs["estimation"].sample_rate_hz \
         else _filter_for(spec, recs["validation"].sample_rate_hz)
-    mode = kinematic_mode(recs["estimation"], spec)
     fb = feedback_z(recs["estimation"])
     closed = fb > FEEDBACK_Z
+    mode = kinematic_mode(recs["estimation"], spec, closed)
     est = equation_data(plant, recs["estimation"], spec, mode, closed)
     val = equation_data(plant, recs["validation"], vspec, mode, closed)
     full = equation_data(plant, real, spec, mode, closed) if validate is None else None

@@ -87,29 +87,55 @@ def choose_filter(speed: FloatArray, fs: float) -> FilterSpec:
     return FilterSpec(cutoff_hz=fc, band_hz=band, decimation=decim, edge=edge)
 
 
-FEEDBACK_Z = 5.0
+FEEDBACK_Z = 4.0
+
+
+FEEDBACK_LAGS = 8
+
+
+def _past(sig: FloatArray, p: int) -> FloatArray:
+    """Columns sig[k-1], ..., sig[k-p] for k = p .. N-1."""
+    win = np.lib.stride_tricks.sliding_window_view(sig, p + 1)
+    out: FloatArray = win[:, :-1][:, ::-1]
+    return out
+
+
+def _innovation(sig: FloatArray, past: FloatArray) -> FloatArray:
+    """What of sig[k] the past does not predict (least squares, with a constant)."""
+    X = np.column_stack([np.ones(len(past)), past])
+    scale = np.maximum(np.linalg.norm(X, axis=0), 1e-300)
+    coef = np.linalg.lstsq(X / scale, sig, rcond=None)[0]
+    out: FloatArray = sig - (X / scale) @ coef
+    return out
 
 
 def feedback_z(rec: Recording) -> float:
     """Evidence that the thrust is a feedback of the measurements (a z-score).
 
-    Above 0.3 fs a servo's motion has no power, so the measured speed and position there
-    are sensor noise. Open loop, the thrust is independent of that noise; under feedback
-    it responds to it at once (a D-term to the speed noise, a P-term to the position
-    noise). The largest |correlation|·sqrt(N) of the high-passed thrust with the
-    high-passed speed or position is returned; above ``FEEDBACK_Z`` the recording is
-    treated as closed loop.
+    Under feedback the thrust at t_k answers the measurement taken at t_k, noise included
+    (a D-term to the speed noise, a P-term to the position noise); open loop it is set
+    without looking at it. So the new part of the thrust (what its own past and the
+    measurements' past do not predict) is correlated with the new part of a measurement
+    (its innovation: sensor noise and process force) only under feedback -- the motion's
+    answer to the thrust comes a sample later and is in the past of both. The largest
+    |correlation|·sqrt(N) over the speed (if measured) and the position is returned; above
+    ``FEEDBACK_Z`` the recording is treated as closed loop.
     """
-    fs = rec.sample_rate_hz
-    hp = butter(4, 0.3 * fs, btype="highpass", fs=fs, output="sos")
-    f = sosfiltfilt(hp, rec.thrust)[20:-20]
+    p = FEEDBACK_LAGS
+    f = np.asarray(rec.thrust, dtype=np.float64)
+    sigs = [rec.position] if rec.speed_derived else [rec.speed, rec.position]
+    if len(f) < 10 * p:
+        return 0.0
     best = 0.0
-    for sig in (rec.speed, rec.position):
-        z = sosfiltfilt(hp, sig)[20:-20]
-        den = float(np.std(f) * np.std(z))
+    for sig in sigs:
+        s = np.asarray(sig, dtype=np.float64)
+        past = np.hstack([_past(f, p), _past(s, p)])
+        ef = _innovation(f[p:], past)
+        es = _innovation(s[p:], past)
+        den = float(np.std(ef) * np.std(es))
         if den > 0:
-            rho = float(np.mean((f - f.mean()) * (z - z.mean()))) / den
-            best = max(best, abs(rho) * math.sqrt(len(f)))
+            rho = float(np.mean(ef * es)) / den
+            best = max(best, abs(rho) * math.sqrt(len(ef)))
     return best
 
 
@@ -124,17 +150,21 @@ def _hf_sigma(sig: FloatArray, fs: float) -> float:
     return float(np.std(sosfiltfilt(hp, sig)[20:-20])) / math.sqrt(0.4)
 
 
-def kinematic_mode(rec: Recording, spec: FilterSpec) -> str:
-    """``position`` when the acceleration is less noisy from the position than from the
-    speed in the filter's band (or the speed is derived), else ``speed``.
+def kinematic_mode(rec: Recording, spec: FilterSpec, closed_loop: bool = True) -> str:
+    """``position`` when the speed is derived, or under feedback when the acceleration is
+    less noisy from the position than from the speed in the filter's band; else ``speed``.
 
     Acceleration from a noisy speed is an error in a regressor (it biases the mass towards
     zero); a position encoder's noise, differentiated twice but band-limited by the same
     filter, is usually far smaller. Both noises are read above 0.3 fs and carried through
-    the exact difference operators and the filter.
+    the exact difference operators and the filter. Open loop the instruments of
+    :mod:`.instruments` remove that bias anyway, and the speed's pairing with the held
+    thrust is exact (it tells a lag from a delay), so a measured speed is kept.
     """
     if rec.speed_derived:
         return "position"
+    if not closed_loop:
+        return "speed"
     fs = rec.sample_rate_hz
     sos = np.asarray(butter(spec.order, spec.cutoff_hz, fs=fs, output="sos"))
     imp = np.zeros(2049)
