@@ -61,6 +61,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Top-level modules that only a ROS 2 installation (or the ``[ros]`` extra) provides.
+ROS_MODULES = frozenset({
+    "rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "geometry_msgs",
+    "sensor_msgs", "diagnostic_msgs", "rosgraph_msgs", "ament_index_python",
+})
+NO_ROS = ("needs ROS 2 (rclpy) and it is not installed here: pip install 'pmsm_sysid[ros]' "
+          "for the ROS 2 Jazzy wheels, or source a ROS 2 Jazzy installation")
+
+
+def ros_missing() -> str | None:
+    """None when rclpy imports; else why not (the module that is missing)."""
+    try:
+        import rclpy  # noqa: F401
+    except ImportError as exc:
+        return str(exc)
+    return None
+
+
 #: BLAS thread pools are set to one thread unless the user chose otherwise: the work here is
 #: many small products (a 71 x 71 x 1000 Gram per OFR step), for which a multi-threaded
 #: OpenBLAS on a busy 2-core machine measured 25x slower (1.6 s instead of 65 ms per fit).
@@ -80,11 +98,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.exit(2, f"pmsm-sysid {args.verb}: error: --ros-args applies to the ROS verbs "
                        f"only ({', '.join(ROS_VERBS)})\n")
     args.ros_args = ros_args
+    if args.verb in ROS_VERBS and ros_missing() is not None:
+        print(f"pmsm-sysid {args.verb}: error: this verb {NO_ROS}", file=sys.stderr)
+        return 2
     try:
         check_ros_args(ros_args)  # before any work: a missing params file is bad input
         return int(args._run(args))
     except PmsmSysidError as exc:
         print(f"pmsm-sysid {args.verb}: error: {exc}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as exc:
+        if (exc.name or "").split(".")[0] not in ROS_MODULES:
+            raise
+        print(f"pmsm-sysid {args.verb}: error: this verb {NO_ROS} (no module "
+              f"'{exc.name}')", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"pmsm-sysid {args.verb}: interrupted", file=sys.stderr)

@@ -1,0 +1,78 @@
+"""Installs with and without ROS: a plain install runs every offline verb; a live verb
+without rclpy exits 2 with one line naming the ``[ros]`` extra, before any work."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+WITHOUT_ROS = """
+import sys
+for name in ("rclpy", "std_msgs", "geometry_msgs", "sensor_msgs", "diagnostic_msgs",
+             "rosgraph_msgs", "builtin_interfaces", "rcl_interfaces"):
+    sys.modules[name] = None  # as on a plain 'pip install' without the [ros] extra
+from pmsm_sysid.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def _without_ros(*argv: str, cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-c", WITHOUT_ROS, *argv], capture_output=True,
+                          text=True, cwd=cwd, timeout=300)
+
+
+@pytest.mark.parametrize("argv", [
+    ["run", "--duration", "1"], ["record", "--out", "never_written"],
+    ["replay", str(REPO / "bags" / "paper_speed_nominal")], ["monitor", "--once"],
+])
+def test_live_verb_without_rclpy_is_one_line_naming_the_extra(argv: list[str],
+                                                             tmp_path: Path) -> None:
+    proc = _without_ros(*argv, cwd=tmp_path)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1, proc.stderr
+    assert lines[0].startswith(f"pmsm-sysid {argv[0]}: error:")
+    assert "pip install 'pmsm_sysid[ros]'" in lines[0] and "Traceback" not in proc.stderr
+    assert list(tmp_path.iterdir()) == []  # refused before any work
+
+
+def test_offline_verbs_run_without_rclpy(tmp_path: Path) -> None:
+    bag = str(REPO / "bags" / "paper_speed_nominal")
+    steps = [
+        ["simulate", "--duration", "1", "--out", "sim"],
+        ["identify", bag, "--json", "id.json"],
+        ["gfrf", "id.json", "--json", "g.json"],
+        ["diagnose", "--plant", str(REPO / "plants" / "nominal.yaml"), "--real",
+         str(REPO / "bags" / "paper_speed_coulomb"), "--no-gfrf", "--json", "d.json"],
+        ["report", "id.json", "--out", "rep"],
+    ]
+    for argv in steps:
+        proc = _without_ros(*argv, cwd=tmp_path)
+        assert proc.returncode == 0, (argv, proc.stderr)
+    assert (tmp_path / "rep" / "index.html").is_file()
+
+
+def test_base_install_has_no_ros_and_the_ros_extra_has_the_locked_wheels(
+        tmp_path: Path) -> None:
+    proc = subprocess.run([sys.executable, "setup.py", "-q", "egg_info", "--egg-base",
+                           str(tmp_path)], cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    requires = (tmp_path / "pmsm_sysid.egg-info" / "requires.txt").read_text()
+    sections: dict[str, list[str]] = {"": []}
+    current = ""
+    for line in filter(None, requires.splitlines()):
+        if line.startswith("["):
+            current = line.strip("[]")
+            sections[current] = []
+        else:
+            sections[current].append(line)
+    base = sections[""]
+    assert not [r for r in base if r.lower().startswith(("ros-", "rclpy"))], base
+    assert {"numpy", "scipy", "matplotlib", "PyYAML"} <= {r.split(">")[0] for r in base}
+    lock = {line.split("==")[0] for line in (REPO / "requirements.lock").read_text().split()}
+    ros = [r.split("~=")[0] for r in sections["ros"]]
+    assert ros and all(name.startswith("ros-jazzy-") and name in lock for name in ros), ros
