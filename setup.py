@@ -24,7 +24,8 @@ setup(
                  "types-PyYAML", "scipy-stubs", "pdoc"],
         # the live verbs (run, record, replay, monitor) and the nodes: ROS 2 Jazzy wheels;
         # not needed where a ROS 2 Jazzy installation is sourced
-        "ros": ["ros-jazzy-rclpy~=7.1", "ros-jazzy-common-interfaces~=5.3"],
+        "ros": ["ros-jazzy-rclpy~=7.1", "ros-jazzy-rmw-fastrtps-cpp~=8.4",
+                "ros-jazzy-common-interfaces~=5.3"],
         "bench": ["sysidentpy==0.9.0", "numpy<=2.3.5"],
     },
     zip_safe=True,
