@@ -328,7 +328,8 @@ def test_identifier_node_survives_failing_fits_a_silent_and_a_restarted_publishe
     params = [Parameter(k, value=v) for k, v in {
         "outputs": ["speed"], "window": 400, "hop": 200, "speed.ny": 2, "speed.nu": 2,
         "speed.terms": 5, "method": "iofr", "publish_period_s": 0.02,
-        "stale_after_s": 1e3}.items()]  # silence counts only in the quiet phase (below)
+        "stale_after_s": 1e3,  # silence counts only in the quiet phase (below)
+        "fit_worker": "thread"}.items()]  # the patched fit_narx lives in this process
     ident = IdentifierNode(context=ros_context, namespace=ns, parameter_overrides=params)
     mon = MonitorNode(context=ros_context, namespace=ns)
     ex = SingleThreadedExecutor(context=ros_context)

@@ -6,14 +6,19 @@ them in the window ring (:class:`WindowScheduler`) and, every ``hop`` samples, h
 the latest window to the fitting thread through a latest-wins queue (:mod:`.fitqueue`). The
 thread runs ``process(window)`` (fits, validation, change detection: :mod:`.tracker`) and
 leaves results for ``drain`` (the publishing side). Nothing on the subscription path waits for
-a fit, and every buffer has a fixed size.
+a fit, and every buffer has a fixed size. ``process`` may be a
+:class:`~.workerproc.ProcessWorker`: the thread then only ships the window to a worker
+process and waits (without holding the GIL) for its result, so the fits use a core of
+their own; ``close`` is called by :meth:`OnlineEngine.stop`.
 
 Counters (:class:`EngineStats`): ``samples_received`` = aligned samples that reached the
 engine, ``samples_dropped`` = those that could not be stored (non-finite values: nothing is
 invented), ``samples_missing`` = stamps missing from the sample grid (lost upstream),
 ``unaligned``/``out_of_order``/``duplicates`` = messages, ``clock_restarts``/``rate_changes``
 = how often the input's clock started again or its rate changed (:class:`StampAligner`),
-``windows_fitted``/``skipped``/``failed`` = windows.
+``windows_fitted``/``skipped``/``failed`` = windows; fit latency = from the moment a window
+is due to the moment its result is ready; ``fit_cpu_s`` = CPU spent on fits (the worker
+process's included).
 """
 
 from __future__ import annotations
@@ -108,6 +113,7 @@ class OnlineEngine(Generic[R]):
                  signals: Sequence[str] = SIGNALS,
                  speed_expected: Callable[[], bool] | None = None) -> None:
         self.config = config
+        self._process = process
         fs = config.sample_rate_hz
         self.aligner = InputAligner(
             signals, config.speed_source,
@@ -121,8 +127,16 @@ class OnlineEngine(Generic[R]):
         self._dropped = 0
         self._worker: FitWorker[Window, R] = FitWorker(
             self._queue, process, self._on_result, self._on_error,
-            latency_of=lambda w: w.due_monotonic, name="pmsm-identifier-fit")
+            latency_of=lambda w: w.due_monotonic, name="pmsm-identifier-fit",
+            cpu_clock=self._cpu_clock(process))
         self._started = False
+
+    @staticmethod
+    def _cpu_clock(process: Callable[[Window], R]) -> Callable[[], float]:
+        worker_cpu = getattr(process, "cpu_s", None)
+        if not isinstance(worker_cpu, float):
+            return time.thread_time
+        return lambda: time.thread_time() + float(getattr(process, "cpu_s", 0.0))
 
     # -- lifecycle --------------------------------------------------------------------
     def start(self) -> None:
@@ -131,9 +145,13 @@ class OnlineEngine(Generic[R]):
             self._started = True
 
     def stop(self, timeout: float = 30.0) -> None:
-        """Fit what is queued (at most ``queue_size`` windows), then stop the thread."""
+        """Fit what is queued (at most ``queue_size`` windows), then stop the thread (and
+        close ``process`` if it has a ``close``, e.g. a worker process)."""
         if self._started:
             self._worker.stop(timeout)
+        close = getattr(self._process, "close", None)
+        if callable(close):
+            close()
 
     # -- subscription path ------------------------------------------------------------
     def push(self, signal: str, stamp_ns: int, value: float) -> None:

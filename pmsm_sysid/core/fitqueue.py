@@ -81,14 +81,18 @@ class FitWorker(Generic[T, R]):
 
     ``fn`` runs off the caller's thread, so the subscription path only pays for the copy of
     a window. Exceptions are passed to ``on_error`` and counted, never kill the thread.
+    ``cpu_clock`` measures the CPU an item costs (default: this thread's CPU time; when
+    ``fn`` hands the item to a worker process, a clock that adds the worker's CPU).
     """
 
     def __init__(self, queue: LatestQueue[T], fn: Callable[[T], R],
                  on_result: Callable[[T, R], None],
                  on_error: Callable[[T, Exception], None] | None = None,
                  latency_of: Callable[[T], float] | None = None,
-                 name: str = "fit-worker", keep_latencies: int = 4096) -> None:
+                 name: str = "fit-worker", keep_latencies: int = 4096,
+                 cpu_clock: Callable[[], float] = time.thread_time) -> None:
         self._queue, self._fn = queue, fn
+        self._cpu_clock = cpu_clock
         self._on_result, self._on_error = on_result, on_error
         self._latency_of = latency_of
         self._lat: deque[float] = deque(maxlen=keep_latencies)
@@ -122,7 +126,7 @@ class FitWorker(Generic[T, R]):
                 if self._queue.closed:
                     return
                 continue
-            c0 = time.thread_time()
+            c0 = self._cpu_clock()
             try:
                 result = self._fn(item)
             except Exception as exc:  # reported, counted; the thread must keep running
@@ -134,7 +138,7 @@ class FitWorker(Generic[T, R]):
                 self._on_result(item, result)
             with self._lock:
                 self._processed += 1
-                self._cpu += time.thread_time() - c0
+                self._cpu += self._cpu_clock() - c0
                 if self._latency_of is not None:
                     self._lat.append(time.monotonic() - self._latency_of(item))
 

@@ -4,10 +4,11 @@ Lives in the pipeline's namespace ``<ns>`` (node ``<ns>/pmsm_gfrf``; topic names
 it). Subscribes to ``<ns>/model`` (std_msgs/String, the identify JSON of one window plus
 ``window``, ``model_id``, ``output``). The subscription callback only hands the raw string to
 a bounded latest-wins queue (``queue_size``, default 1; a model replaced before it was
-analysed is counted as skipped); a worker thread parses it and runs
-:func:`pmsm_sysid.core.gfrf_analysis.analyse_json` (H1 peaks, H2/H3 ridges, poles, support by
-the excitation) off the executor. A timer publishes finished results from the executor
-thread (layouts in :mod:`.gfrf_msgs`):
+analysed is counted as skipped); a worker thread passes it to a worker process of the node's
+own (parameter ``worker: process``, the default; ``thread`` analyses in the thread), which
+parses it and runs :func:`pmsm_sysid.core.gfrf_analysis.analyse_json` (H1 peaks, H2/H3
+ridges, poles, support by the excitation): off the executor and off its GIL. A timer
+publishes finished results from the executor thread (layouts in :mod:`.gfrf_msgs`):
 
 * ``<ns>/ridges`` (std_msgs/String): the gfrf JSON + ``model_id``/``output``/``window``;
 * ``<ns>/ridge_frequencies`` (std_msgs/Float64MultiArray): one row per peak/ridge;
@@ -21,6 +22,7 @@ import json
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -31,33 +33,15 @@ from std_msgs.msg import Float64MultiArray, String
 
 from ..core.errors import GfrfError
 from ..core.fitqueue import FitWorker, LatestQueue
+from ..core.gfrf_message import MessageAnalyser, analyse_message
+from ..core.workerproc import ProcessWorker
 from ..topics import DEFAULT_NAMESPACE, MODEL, RIDGE_FREQUENCIES, RIDGES, VALIDATION
 from .gfrf_msgs import ridges_message, validation_message
 
-DEFAULTS: dict[str, Any] = {"queue_size": 1, "orders": [1, 2, 3], "publish_period_s": 0.05}
+DEFAULTS: dict[str, Any] = {"queue_size": 1, "orders": [1, 2, 3], "publish_period_s": 0.05,
+                            "worker": "process"}
+__all__ = ["DEFAULTS", "GfrfNode", "analyse_message"]
 _Item = tuple[str, float]  # (raw JSON, monotonic time received)
-
-
-def analyse_message(text: str, orders: tuple[int, ...] = (1, 2, 3)) -> dict[str, Any]:
-    """The ridges JSON of one model message (pure: what the worker thread runs)."""
-    from ..core.errors import PmsmSysidError
-    from ..core.gfrf_analysis import analyse_json
-
-    t0 = time.perf_counter()
-    try:
-        model = json.loads(text)
-    except ValueError as exc:
-        raise GfrfError(f"model message is not JSON: {exc}") from exc
-    if not isinstance(model, dict):
-        raise GfrfError("model message is not a JSON object")
-    try:
-        res = analyse_json(model, orders=orders).to_dict()
-    except PmsmSysidError as exc:
-        raise GfrfError(f"model {model.get('model_id', '?')}: {exc}") from exc
-    res.update({"model_id": model.get("model_id"), "output": model.get("output"),
-                "window": model.get("window"),
-                "analysis_time_ms": 1e3 * (time.perf_counter() - t0)})
-    return {"gfrf": res, "model": model}
 
 
 class GfrfNode(Node):
@@ -79,10 +63,18 @@ class GfrfNode(Node):
         self.published = 0
         self.last_ridges: dict[str, Any] | None = None
         self.last_validation: dict[str, Any] | None = None
+        if p["worker"] not in ("process", "thread"):
+            raise GfrfError(f"parameter worker must be 'process' or 'thread' (got "
+                            f"'{p['worker']}')")
         self.queue: LatestQueue[_Item] = LatestQueue(int(p["queue_size"]))
+        self.analyser: Callable[[str], dict[str, Any]] = (
+            ProcessWorker[str, dict[str, Any]](MessageAnalyser, (orders,))
+            if p["worker"] == "process" else MessageAnalyser(orders))
+        analyser = self.analyser
         self.worker: FitWorker[_Item, dict[str, Any]] = FitWorker(
-            self.queue, lambda item: analyse_message(item[0], orders), self._finished,
-            on_error=self._failed, latency_of=lambda item: item[1], name="gfrf-worker")
+            self.queue, lambda item: analyser(item[0]), self._finished,
+            on_error=self._failed, latency_of=lambda item: item[1], name="gfrf-worker",
+            cpu_clock=lambda: time.thread_time() + float(getattr(analyser, "cpu_s", 0.0)))
         self._ridges_pub = self.create_publisher(String, RIDGES, 10)
         self._array_pub = self.create_publisher(Float64MultiArray, RIDGE_FREQUENCIES, 10)
         self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION, 10)
@@ -135,4 +127,7 @@ class GfrfNode(Node):
 
     def destroy_node(self) -> None:
         self.worker.stop()
+        close = getattr(self.analyser, "close", None)
+        if close is not None:
+            close()
         super().destroy_node()  # type: ignore[no-untyped-call]

@@ -7,7 +7,9 @@ The node lives in the pipeline's namespace ``<ns>`` (default ``/pmsm``: node
 ``effort``/``velocity``/``position`` of ``joint_name``). The work is done by
 :class:`pmsm_sysid.core.engine.OnlineEngine` (alignment,
 window ring, fitting thread) around :class:`pmsm_sysid.core.tracker.WindowTracker` (fits,
-cross-validation, change detection); ``__init__`` only wires parameters, subscriptions,
+cross-validation, change detection), which runs in a worker process of its own (parameter
+``fit_worker: process``, the default; ``thread`` runs it in the engine's fitting thread);
+``__init__`` only wires parameters, subscriptions,
 publishers and one timer that publishes finished results:
 
 * ``<ns>/model`` (std_msgs/String): one identify-JSON per output and window, plus
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -37,7 +40,9 @@ from ..core.engine import EngineConfig, OnlineEngine, WindowError
 from ..core.errors import DataError
 from ..core.gfrf_analysis import json_safe
 from ..core.inputs import InputReport, describe_inputs
-from ..core.tracker import WindowResult, WindowTracker, tracker_config
+from ..core.online import Window
+from ..core.tracker import TrackerConfig, WindowResult, WindowTracker, tracker_config
+from ..core.workerproc import ProcessWorker
 from ..rosutil import data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
 from ..topics import CHANGE, DEFAULT_NAMESPACE, INPUT_TYPES, MODEL, VALIDATION
 
@@ -54,8 +59,18 @@ DEFAULTS: dict[str, Any] = {
     "position.terms": 15, "min_r2": 0.9, "change.s_confirm": 7.0,
     "change.baseline": 24, "change.warmup": 8, "change.min_r2": 0.99,
     "publish_period_s": 0.05, "stale_after_s": 1.0,
-    "speed_source": "auto", "inputs_report_s": 3.0,
+    "speed_source": "auto", "inputs_report_s": 3.0, "fit_worker": "process",
 }
+FIT_WORKERS = ("process", "thread")
+
+
+def fit_processor(config: TrackerConfig, where: str) -> Callable[[Window], WindowResult]:
+    """``WindowTracker(config).process``, in a worker process of its own (``process``: the
+    fits neither hold this process's GIL nor wait for it) or called in the engine's fitting
+    thread (``thread``)."""
+    if where == "thread":
+        return WindowTracker(config).process
+    return ProcessWorker[Window, WindowResult](WindowTracker, (config,), method="process")
 
 
 def status(name: str, level: bytes, message: str, hardware_id: str,
@@ -77,14 +92,16 @@ class IdentifierNode(Node):
                          parameter_overrides=parameter_overrides or [])
         p = {k: self.declare_parameter(k, v).value for k, v in DEFAULTS.items()}
         self.params = p
-        self.tracker = WindowTracker(tracker_config(p))
+        config = tracker_config(p)
+        if p["fit_worker"] not in FIT_WORKERS:
+            raise DataError(f"fit_worker must be 'process' or 'thread', got '{p['fit_worker']}'")
         self.engine: OnlineEngine[WindowResult] = OnlineEngine(
             EngineConfig(window=int(p["window"]), hop=int(p["hop"]),
-                         history=self.tracker.history, queue_size=int(p["queue_size"]),
+                         history=config.history, queue_size=int(p["queue_size"]),
                          sample_rate_hz=float(p["sample_rate_hz"]),
                          tolerance_s=float(p["tolerance_s"]),
                          speed_source=str(p["speed_source"])),
-            self.tracker.process, speed_expected=self._speed_published)
+            fit_processor(config, p["fit_worker"]), speed_expected=self._speed_published)
         self.last: dict[str, Any] = {"models": {}, "validation": {}, "changes": []}
         self.models_published = 0
         self.errors: list[str] = []
@@ -94,10 +111,14 @@ class IdentifierNode(Node):
         self._model_pub = self.create_publisher(String, MODEL, 50)
         self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION, 50)
         self._change_pub = self.create_publisher(DiagnosticArray, CHANGE, 50)
-        self._input_topics = self._layout(p)
-        self._started = time.monotonic()
-        self._inputs_logged: tuple[Any, ...] | None = None
-        self._subscribe(p)
+        try:
+            self._input_topics = self._layout(p)
+            self._started = time.monotonic()
+            self._inputs_logged: tuple[Any, ...] | None = None
+            self._subscribe(p)
+        except BaseException:
+            self.engine.stop()  # ends the worker process
+            raise
         self._timer = self.create_timer(float(p["publish_period_s"]), self.publish_results)
         self.engine.start()
 

@@ -1,0 +1,77 @@
+"""Fits in a worker process (core/workerproc.py): same results as in-process, in order,
+failures reported, a dead worker replaced. Completion conditions only (no timing)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+
+import pytest
+from narx_systems import QUADRATIC, simulate, white_input
+
+from pmsm_sysid.core.engine import EngineConfig, OnlineEngine, WindowError
+from pmsm_sysid.core.identify import FitConfig
+from pmsm_sysid.core.model import Structure
+from pmsm_sysid.core.online import NS_PER_S
+from pmsm_sysid.core.tracker import OutputConfig, TrackerConfig, WindowResult, WindowTracker
+from pmsm_sysid.core.workerproc import ProcessWorker, WorkerDied
+
+CONFIG = TrackerConfig(outputs=(OutputConfig("speed", FitConfig(
+    structure=Structure(ny=2, nu=2, degree=2), n_terms=5)),), window=400, hop=200)
+
+
+def _results(process: object, n: int = 1600) -> list[WindowResult | WindowError]:
+    """Feed the engine one hop at a time (the latest-wins queue then skips nothing)."""
+    engine: OnlineEngine[WindowResult] = OnlineEngine(
+        EngineConfig(window=400, hop=200, history=CONFIG.history), process)  # type: ignore[arg-type]
+    engine.start()
+    u = white_input(n, seed=7)
+    y = simulate(QUADRATIC, u, noise_std=1e-3, seed=7)
+    try:
+        for k in range(n):
+            engine.push_sample(NS_PER_S + k * 2_000_000, (u[k], y[k], 0.0))
+            if (k + 1) % 200 == 0:
+                assert engine.wait_idle(60)
+        stats = engine.stats
+    finally:
+        engine.stop()
+    assert stats.windows_skipped == 0 and stats.windows_failed == 0
+    assert stats.fit_cpu_s > 0
+    return engine.drain()
+
+
+def _timeless(r: WindowResult | WindowError) -> str:
+    """The result without its timings, as JSON (NaN equals NaN there)."""
+    assert isinstance(r, WindowResult)
+    models = [{k: v for k, v in m.items() if k not in ("fit_time_ms", "timing_ms")}
+              for m in r.models]
+    return json.dumps([r.seq, models, r.validations, r.changes, r.decisions, r.errors],
+                      sort_keys=True)
+
+
+def test_the_tracker_in_a_worker_process_gives_the_in_process_results() -> None:
+    here = _results(WindowTracker(CONFIG).process)
+    worker = ProcessWorker[object, WindowResult](WindowTracker, (CONFIG,), method="process")
+    there = _results(worker)  # the engine's stop() closes the worker
+    assert len(here) == len(there) == 6
+    assert [_timeless(r) for r in here] == [_timeless(r) for r in there]
+    assert any(r.validations for r in there if isinstance(r, WindowResult))  # state carried
+
+
+def test_worker_runs_elsewhere_reraises_and_replaces_a_dead_process() -> None:
+    with ProcessWorker[object, WindowResult](WindowTracker, (CONFIG,),
+                                             method="process") as worker:
+        with pytest.raises(AttributeError):
+            worker(None)  # not a window: the error of the worker, raised here
+        pid = worker.pid
+        assert pid is not None and pid != os.getpid()
+        os.kill(pid, signal.SIGKILL)
+        with pytest.raises(WorkerDied):
+            worker(None)
+        assert worker.restarts == 1
+        with pytest.raises(AttributeError):  # the new process serves the next item
+            worker(None)
+        assert worker.pid not in (None, pid)
+    with pytest.raises(WorkerDied):
+        worker(None)  # closed
