@@ -7,11 +7,15 @@ executor and yields a :class:`Pipeline`; on exit everything is shut down in the 
 importable classes, so a user's own process can compose them the same way.
 
 Clock: with ``clock="wall"`` the sim node paces itself to real time. With ``clock="sim"``
-and the identifier in the same process, the pipeline steps the simulator itself, ``burst``
-samples at a time, whenever the identifier has taken what was published and no window waits
-for a fit (back-pressure), so the run is as fast as identification allows, loses nothing and
+and the identifier in the same process, the pipeline steps the simulator itself, in bursts
+of up to ``hop`` samples, whenever the identifier has taken what was published and no window
+waits for a fit (back-pressure), so the run is as fast as identification allows, loses nothing and
 skips no window (deterministic: same plant and seed, same models); without an identifier
-here, the sim node runs at ``rate`` x real time on its own timer.
+here, the sim node runs at ``rate`` x real time on its own timer. With ``record``, the
+recorder runs in a process of its own (:mod:`.nodes.recorder_process`), started after the
+nodes (a sim elsewhere that waits for a subscriber finds the identifier first); the sim here
+starts once the recorder's subscriptions are matched, and under the sim clock it also waits for the
+recorder (its progress is read from shared memory), so the bag holds every sample.
 """
 
 from __future__ import annotations
@@ -30,10 +34,12 @@ from rclpy.parameter import Parameter
 
 from .core.errors import PmsmSysidError
 from .core.plant import Plant
-from .topics import DEFAULT_NAMESPACE
+from .topics import DEFAULT_NAMESPACE, INPUT_TYPES
 
 NODES = ("sim", "identifier", "gfrf")
 BACKLOG = 200  # samples the sim may run ahead of the identifier under back-pressure
+RECORD_BACKLOG = 2000  # ... and ahead of the recorder (it queues 10000 per topic)
+MATCH_S = 30.0  # how long to wait for the recorder process to match the publishers
 SETTLE_S = 5.0  # after the sim's last sample, how long the identifier may still take
 
 
@@ -63,6 +69,7 @@ class Pipeline:
     clock: str
     stop: threading.Event = field(default_factory=threading.Event)
     recorder: Any = None
+    record_result: dict[str, Any] | None = None
     started: float = field(default_factory=time.monotonic)
 
     @property
@@ -117,13 +124,21 @@ class Pipeline:
         return ident is None or bool(ident.engine.samples_received >= self.sim.published)
 
     def _step_sim(self, limit: int | None) -> None:
-        """Publish the next burst unless the identifier (or the GFRF node) is behind."""
-        sim, ident, gfrf = self.sim, self.identifier, self.gfrf
+        """Publish the next burst unless the identifier (or the recorder) is behind (the
+        GFRF node analyses the newest models and counts what it skips). At most ``hop``
+        samples are in flight (published, not yet taken by the identifier) and none is
+        published while a window waits for the fitting worker, so at most one window
+        becomes due per burst and none is ever skipped."""
+        sim, ident = self.sim, self.identifier
         backlog = sim.published - ident.engine.samples_received
-        busy = ident.engine.windows_waiting > 0 or (gfrf is not None and len(gfrf.queue) > 0)
-        if backlog < BACKLOG and not busy and (limit is None or sim.published < limit):
-            burst = int(sim.values["burst"])
-            sim.step(burst if limit is None else min(burst, limit - sim.published))
+        busy = ident.engine.windows_waiting > 0
+        if self.recorder is not None:
+            busy = busy or sim.published - self.recorder.samples_recorded >= RECORD_BACKLOG
+        room = min(BACKLOG, ident.engine.config.hop) - backlog
+        if limit is not None:
+            room = min(room, limit - sim.published)
+        if room > 0 and not busy:
+            sim.step(max(room, 0))
 
     def finish(self, timeout_s: float = 30.0) -> None:
         """Let other processes acknowledge the sim's last samples, fit what is queued and
@@ -151,6 +166,19 @@ class Pipeline:
             self._spin_while(lambda: col.counts["model"] < models
                              or col.counts["ridges"] < ridges, min(timeout_s, 5.0))
         self.executor.spin_once(timeout_sec=0.05)
+        if self.recorder is not None:
+            self.finish_recording(timeout_s)
+
+    def finish_recording(self, timeout_s: float = 30.0) -> None:
+        """Wait until the recorder acknowledged every message published here, then let it
+        take them all, finalise the bag and report its counts (``record_result``)."""
+        from rclpy.duration import Duration
+
+        for node in self.nodes.values():
+            for pub in node.publishers:
+                if pub.topic_name in self.recorder.topics:
+                    pub.wait_for_all_acked(Duration(seconds=min(timeout_s, 5.0)))
+        self.record_result = self.recorder.stop(timeout_s)
 
     def _spin_while(self, busy: Callable[[], bool], timeout_s: float) -> None:
         t_end = time.monotonic() + timeout_s
@@ -235,8 +263,6 @@ def build_pipeline(
         made: dict[str, Any] = {}
         pipe = Pipeline(ctx, executor, made, clock)
         try:
-            if record is not None:  # first: it records from the first sample on
-                pipe.recorder = _recorder(ctx, executor, record, namespace, made)
             if "identifier" in names or "gfrf" in names:
                 from .nodes.collector import ResultCollector
 
@@ -245,6 +271,9 @@ def build_pipeline(
             for name in names:
                 made[name] = _make_checked(name, ctx, opts)
                 executor.add_node(made[name])
+            if record is not None:  # the sim here is held until it records
+                pipe.recorder = _recorder(ctx, record, namespace)
+                _wait_for_recorder(pipe, MATCH_S)
             if pipe.stepped:
                 pipe.sim.stop_timer()  # stepped by the pipeline (back-pressure)
             elif pipe.sim is not None and wait_s > 0 and "identifier" not in names:
@@ -289,33 +318,43 @@ def _wait_until_matched(sim: Any, executor: SingleThreadedExecutor, wait_s: floa
         sim.start_timer()
 
 
-def _recorder(ctx: Context, executor: SingleThreadedExecutor, path: str, namespace: str,
-              made: dict[str, Any]) -> Any:
-    """A RecorderNode (inputs and identification outputs) writing a new bag at ``path``."""
-    from .bagio import BagRecorder
-    from .nodes.recorder import RecorderNode
+def _recorder(ctx: Context, path: str, namespace: str) -> Any:
+    """A recorder process (inputs and identification outputs) writing a new bag at
+    ``path`` on the context's domain."""
+    from .nodes.recorder_process import RecorderProcess
 
-    bag = BagRecorder(path)
+    return RecorderProcess(path, namespace=namespace, domain_id=ctx.get_domain_id())
+
+
+def _wait_for_recorder(pipe: Pipeline, timeout_s: float) -> bool:
+    """Hold the sim until the recorder process has matched every publisher of this
+    process on a recorded topic (it then misses no sample), at most ``timeout_s``."""
+    rec, sim = pipe.recorder, pipe.sim
+    pubs = [p for n in pipe.nodes.values() for p in n.publishers if p.topic_name in rec.topics]
+    local = {}
+    for p in pubs:
+        local[p.topic_name] = sum(s.topic_name == p.topic_name
+                                  for n in pipe.nodes.values() for s in n.subscriptions)
+    if sim is not None and not pipe.stepped:
+        sim.stop_timer()
     try:
-        node = RecorderNode(bag, context=ctx, namespace=namespace)
-    except BaseException:
-        bag.close()
-        raise
-    made["recorder"] = node
-    executor.add_node(node)
-    return node
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if all(p.get_subscription_count() > local[p.topic_name] for p in pubs):
+                return True
+            time.sleep(0.02)
+        return False
+    finally:
+        if sim is not None and not pipe.stepped:
+            sim.start_timer()
 
 
 def _shutdown(pipe: Pipeline) -> None:
     """Finalise the recording first (it must survive anything after), then the nodes."""
-    rec = pipe.nodes.pop("recorder", None)
     try:
-        if rec is not None:
-            rec.recorder.close()
+        if pipe.recorder is not None:
+            pipe.recorder.close()
     finally:
-        if rec is not None:
-            pipe.executor.remove_node(rec)
-            rec.destroy_node()
         for node in pipe.nodes.values():
             pipe.executor.remove_node(node)
             node.destroy_node()
@@ -369,6 +408,25 @@ def pipeline_summary(pipe: Pipeline) -> dict[str, Any]:
         g = gfrf.summary()
         out["gfrf"] = {k: v for k, v in g.items() if not k.startswith("last_")}
     if pipe.recorder is not None:
-        out["recorded_messages"] = pipe.recorder.total
-        out["record"] = str(pipe.recorder.recorder.path)
+        out.update(record_summary(pipe))
     return out
+
+
+def record_summary(pipe: Pipeline) -> dict[str, Any]:
+    """What the recorder wrote and what it lost: per input topic, the samples published
+    here that are not in the bag, or (sim elsewhere) the samples its stamps skip."""
+    res = pipe.record_result or {}
+    topics: dict[str, int] = res.get("topics", {})
+    missing: dict[str, int] = res.get("samples_missing", {})
+    inputs = [t for t in sorted(pipe.recorder.topics) if t.rsplit("/", 1)[-1] in INPUT_TYPES]
+    if pipe.sim is not None:
+        lost = max((pipe.sim.published - topics.get(t, 0) for t in inputs), default=0)
+    elif pipe.identifier is not None:  # received here but not recorded, or skipped stamps
+        got = pipe.identifier.engine.stats.samples_received
+        lost = max((max(got - topics.get(t, 0), missing.get(t, 0)) for t in inputs), default=0)
+    else:
+        lost = max((missing.get(t, 0) for t in inputs), default=0)
+    return {"record": str(pipe.recorder.path),
+            "recorded_messages": res.get("messages") if res else None,
+            "recorded_by_topic": topics, "record_samples_lost": lost if res else None,
+            "record_stamp_gaps": sum(res.get("stamp_gaps", {}).values()) if res else None}

@@ -131,6 +131,12 @@ def _headline(s: dict[str, Any]) -> str:
         top = max(r["h1"]["peaks"], key=lambda p: p["gain_db"] or -1e300)
         parts.append(f"H1 peak {top['freq_hz']:.2f} Hz")
     parts.append(f"{len(s['change_events'])} change event(s)")
+    if s.get("recorded_messages") is not None:
+        lost = s["record_samples_lost"]
+        parts.append(f"recorded {s['recorded_messages']} messages, "
+                     + (f"RECORDING LOST {lost} samples" if lost else "no sample lost"))
+    elif s.get("record"):
+        parts.append("RECORDING NOT FINALISED (counts unknown)")
     return "; ".join(parts)
 
 

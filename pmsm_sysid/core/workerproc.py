@@ -13,12 +13,14 @@ caller (a process running rclpy has middleware threads that a fork would copy in
 state). It is started and warmed up (its modules imported) when the worker is created, not
 when the first item is due. If the process dies (killed, out of memory), the item fails
 with :class:`WorkerDied`, the processor is rebuilt in a new process (its state starts
-again), and the next item goes there.
+again), and the next item goes there. A worker whose owner is gone (killed with SIGKILL,
+so it could not say so) ends itself within half a second.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -42,7 +44,33 @@ class WorkerDied(PmsmSysidError):
     """The worker process ended while processing an item (its state is rebuilt)."""
 
 
-def _build(factory: Callable[..., Any], args: Sequence[Any], method: str | None) -> None:
+def owner_alive(pid: int) -> bool:
+    """True while process ``pid`` runs (a zombie, killed but not yet reaped, is gone)."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except (OSError, IndexError):
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        except OSError:
+            return True
+        return True
+
+
+def _watch(owner: int, period_s: float = 0.5) -> None:
+    """End this worker when its owner is gone (a SIGKILLed owner cannot tell it)."""
+    while owner_alive(owner):
+        time.sleep(period_s)
+    os._exit(0)
+
+
+def _build(factory: Callable[..., Any], args: Sequence[Any], method: str | None,
+           owner: int, nice: int) -> None:
+    if nice:
+        os.nice(nice)
+    threading.Thread(target=_watch, args=(owner,), name="owner-watch", daemon=True).start()
     obj = factory(*args)
     _state["fn"] = getattr(obj, method) if method else obj
 
@@ -69,12 +97,13 @@ class ProcessWorker(Generic[T, R]):
     of it there on ``item`` and returns the result (exceptions are re-raised here).
 
     Call from one thread at a time (calls are served in order). :attr:`cpu_s` adds up the
-    worker's CPU time per item; :meth:`close` ends the process.
+    worker's CPU time per item; :meth:`close` ends the process. ``nice`` > 0 lowers the
+    worker's scheduling priority (work that may fall behind and skip, e.g. analyses).
     """
 
     def __init__(self, factory: Callable[..., Any], args: Sequence[Any] = (),
-                 method: str | None = None) -> None:
-        self._spec = (factory, tuple(args), method)
+                 method: str | None = None, nice: int = 0) -> None:
+        self._spec = (factory, tuple(args), method, os.getpid(), int(nice))
         self._lock = threading.Lock()
         self._cpu = 0.0
         self.restarts = 0

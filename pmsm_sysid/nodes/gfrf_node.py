@@ -7,7 +7,8 @@ a bounded latest-wins queue (``queue_size``, default 1; a model replaced before 
 analysed is counted as skipped); a worker thread passes it to a worker process of the node's
 own (parameter ``worker: process``, the default; ``thread`` analyses in the thread), which
 parses it and runs :func:`pmsm_sysid.core.gfrf_analysis.analyse_json` (H1 peaks, H2/H3
-ridges, poles, support by the excitation): off the executor and off its GIL. A timer
+ridges, poles, support by the excitation): off the executor and off its GIL, at a lower
+scheduling priority than the fits (an analysis may be skipped, a fit should not). A timer
 publishes finished results from the executor thread (layouts in :mod:`.gfrf_msgs`):
 
 * ``<ns>/ridges`` (std_msgs/String): the gfrf JSON + ``model_id``/``output``/``window``;
@@ -41,6 +42,7 @@ from .gfrf_msgs import ridges_message, validation_message
 DEFAULTS: dict[str, Any] = {"queue_size": 1, "orders": [1, 2, 3], "publish_period_s": 0.05,
                             "worker": "process"}
 __all__ = ["DEFAULTS", "GfrfNode", "analyse_message"]
+NICE = 10  # the analyses yield the CPU to the fits and the data path (they may skip models)
 _Item = tuple[str, float]  # (raw JSON, monotonic time received)
 
 
@@ -68,7 +70,7 @@ class GfrfNode(Node):
                             f"'{p['worker']}')")
         self.queue: LatestQueue[_Item] = LatestQueue(int(p["queue_size"]))
         self.analyser: Callable[[str], dict[str, Any]] = (
-            ProcessWorker[str, dict[str, Any]](MessageAnalyser, (orders,))
+            ProcessWorker[str, dict[str, Any]](MessageAnalyser, (orders,), nice=NICE)
             if p["worker"] == "process" else MessageAnalyser(orders))
         analyser = self.analyser
         self.worker: FitWorker[_Item, dict[str, Any]] = FitWorker(

@@ -10,7 +10,11 @@
   fast replay or a busy executor are absorbed rather than overwritten.
 - Bag timestamp = the middleware's receive time of the message (``received_timestamp``).
   A topic enters the bag with its first message, so the bag lists only topics that carried
-  data. The bag is flushed (readable, crash-safe) once per second.
+  data. The bag is flushed (readable, crash-safe) every ``flush_period_s`` (0.5 s).
+- Intake: each subscription callback also takes what already waits on every recorded topic
+  (up to ``DRAIN_ROUNDS`` rounds), so a burst costs one executor round, not one per message.
+- Losses are not silent: on the input topics the header stamps are followed, and a stamp
+  step of more than 1.5 sample periods counts the samples it skips (``summary()``).
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from ..bagio import BagRecorder
+from ..bagio.cdr import decode_stamped
 from ..rosutil import data_qos, message_class
 from ..topics import (
     DEFAULT_NAMESPACE,
@@ -37,6 +42,7 @@ from ..topics import (
 )
 
 STAT_OUTPUTS = ("speed", "position")  # outputs whose plottable numbers are recorded by default
+DRAIN_ROUNDS = 100
 
 
 def default_topics(namespace: str) -> dict[str, str]:
@@ -64,12 +70,18 @@ class RecorderNode(Node):
 
     def __init__(self, recorder: BagRecorder, *, context: Context | None = None,
                  namespace: str = DEFAULT_NAMESPACE, topics: Sequence[str] | None = None,
-                 depth: int = 10000, flush_period_s: float = 1.0,
+                 depth: int = 10000, flush_period_s: float = 0.5,
                  node_name: str = "pmsm_record") -> None:
         super().__init__(node_name, context=context, namespace=namespace)
         self.recorder = recorder
         self.depth = depth
         self.counts: Counter[str] = Counter()
+        self.inputs = {topic_name(self.get_namespace(), s) for s in INPUT_TYPES}
+        self._last_stamp: dict[str, int] = {}
+        self._period: dict[str, int] = {}
+        self.gaps: Counter[str] = Counter()
+        self.missing: Counter[str] = Counter()
+        self._subs: list[tuple[str, str, Any]] = []
         self.first_receive_ns: int | None = None
         ns = self.get_namespace()
         wanted = {self.resolve_topic_name(t): ty for t, ty in default_topics(ns).items()} \
@@ -95,21 +107,63 @@ class RecorderNode(Node):
                              reliability=ReliabilityPolicy.BEST_EFFORT)
         self.types[topic] = msgtype
         callback: Any = self._writer(topic, msgtype)  # rclpy passes MessageInfo to 2-arg ones
-        self.create_subscription(message_class(msgtype), topic, callback, qos, raw=True)
+        sub = self.create_subscription(message_class(msgtype), topic, callback, qos, raw=True)
+        self._subs.append((topic, msgtype, sub))
 
     def _writer(self, topic: str, msgtype: str) -> Callable[[bytes, Any], None]:
-        recorder, counts = self.recorder, self.counts
-
         def callback(data: bytes, info: Any) -> None:
-            stamp = int(info.get("received_timestamp") or 0) or time.time_ns()
-            if not counts[topic]:
-                recorder.add_topic(topic, msgtype)
-                if self.first_receive_ns is None:
-                    self.first_receive_ns = stamp
-            recorder.write(topic, stamp, data)
-            counts[topic] += 1
+            self._store(topic, msgtype, data, info)
+            self._drain()
 
         return callback
+
+    def _store(self, topic: str, msgtype: str, data: bytes, info: Any) -> None:
+        stamp = int(info.get("received_timestamp") or 0) or time.time_ns()
+        if not self.counts[topic]:
+            self.recorder.add_topic(topic, msgtype)
+            if self.first_receive_ns is None:
+                self.first_receive_ns = stamp
+        self.recorder.write(topic, stamp, data)
+        self.counts[topic] += 1
+        if topic in self.inputs:
+            self._follow(topic, data)
+
+    def _follow(self, topic: str, data: bytes) -> None:
+        """Count stamp gaps (samples lost before they reached the bag) of an input topic."""
+        got = decode_stamped(data)
+        if got is None:
+            return
+        stamp, last = got[0], self._last_stamp.get(topic)
+        self._last_stamp[topic] = stamp
+        if last is None:
+            return
+        step = stamp - last
+        if step <= 0:
+            return
+        period = min(self._period.get(topic, step), step)
+        self._period[topic] = period
+        if step > 1.5 * period:
+            self.gaps[topic] += 1
+            self.missing[topic] += round(step / period) - 1
+
+    def _drain(self) -> None:
+        """Take what already waits on the recorded topics, round robin (see module doc)."""
+        for _ in range(DRAIN_ROUNDS):
+            took = False
+            for topic, msgtype, sub in self._subs:
+                with sub.handle:
+                    got = sub.handle.take_message(sub.msg_type, True)
+                if got is not None:
+                    self._store(topic, msgtype, got[0], got[1])
+                    took = True
+            if not took:
+                return
+
+    def summary(self) -> dict[str, Any]:
+        """Messages per topic, and the stamp gaps and samples missing per input topic."""
+        return {"messages": self.total, "topics": dict(self.counts),
+                "stamp_gaps": dict(self.gaps), "samples_missing": dict(self.missing),
+                "path": str(self.recorder.path)}
 
     def _discover(self) -> None:
         """Subscribe to pending topics once a publisher shows their type."""

@@ -1,0 +1,179 @@
+"""The recorder of ``run --record`` in a process of its own (rclpy context, executor, GIL).
+
+:class:`RecorderProcess` starts a :class:`~.recorder.RecorderNode` writing a new bag in a
+worker process (``forkserver``: never a fork of a process that runs rclpy) and returns once
+its subscriptions exist (a bag that cannot be created is refused there, one clear error). No
+fit, analysis or publishing callback of the caller can delay it: it only competes for a core.
+
+- Progress: the messages recorded per input topic are in shared memory
+  (:attr:`RecorderProcess.samples_recorded`), so a simulated motor can pace itself to the
+  recorder as well as to the identifier.
+- :meth:`RecorderProcess.stop`: the recorder takes every message still waiting (the caller
+  has made sure its publishers were acknowledged), finalises the bag and returns its counts
+  (messages per topic, stamp gaps and samples missing per input topic).
+- The recorder ignores SIGINT/SIGTERM (the caller decides when it stops). If the caller dies
+  (even SIGKILL), the recorder sees its control pipe close, takes what is waiting and
+  finalises the bag: it stays readable, as it is, up to the moment of the kill. If the
+  recorder itself is killed, the bag is flushed every ``flush_period_s`` (0.5 s): readable
+  as it is, missing at most that much.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import signal
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from ..core.errors import PmsmSysidError
+from ..core.workerproc import START_METHOD
+from ..topics import INPUT_TYPES, input_topic
+
+NODE_NAME = "pmsm_record"
+QUIET_ROUNDS = 3  # executor rounds without a new message: everything acknowledged is taken
+
+
+def _drain(executor: Any, node: Any, timeout_s: float = 0.1) -> None:
+    """Spin until QUIET_ROUNDS rounds in a row bring no message (bounded: 30 s)."""
+    import time
+
+    quiet, deadline = 0, time.monotonic() + 30.0
+    while quiet < QUIET_ROUNDS and time.monotonic() < deadline:
+        before = node.total
+        executor.spin_once(timeout_sec=timeout_s)
+        quiet = quiet + 1 if node.total == before else 0
+
+
+def _serve(conn: Any, path: str, namespace: str, domain_id: int | None,
+           topics: Sequence[str] | None, flush_s: float, progress: Any) -> None:
+    """The recorder process: record until told to stop or the caller is gone."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    from ..bagio import BagRecorder
+    from .recorder import RecorderNode
+
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain_id,
+               signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        try:
+            bag = BagRecorder(path, flush_interval_s=flush_s)
+        except PmsmSysidError as exc:
+            conn.send(("error", str(exc)))
+            return
+        node = RecorderNode(bag, context=ctx, namespace=namespace, topics=topics,
+                            flush_period_s=flush_s, node_name=NODE_NAME)
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(node)
+        inputs = [input_topic(namespace, s) for s in INPUT_TYPES]
+        conn.send(("ready", None))
+        command = _record(conn, executor, node, inputs, progress)
+        _drain(executor, node)
+        bag.close()
+        for i, topic in enumerate(inputs):
+            progress[i] = node.counts[topic]
+        if command is not None:
+            conn.send(("done", node.summary()))
+        executor.shutdown(timeout_sec=2.0)
+        node.destroy_node()  # type: ignore[no-untyped-call]
+    finally:
+        from rclpy.utilities import try_shutdown
+
+        try_shutdown(context=ctx)
+
+
+def _record(conn: Any, executor: Any, node: Any, inputs: list[str], progress: Any) -> Any:
+    """Spin until a command arrives (returned) or the caller's end of the pipe closes (None)."""
+    while True:
+        executor.spin_once(timeout_sec=0.05)
+        for i, topic in enumerate(inputs):
+            progress[i] = node.counts[topic]
+        if conn.poll():
+            try:
+                return conn.recv()
+            except EOFError:
+                return None
+
+
+class RecorderProcess:
+    """A RecorderNode writing ``path`` in a process of its own (see the module docstring)."""
+
+    def __init__(self, path: str | Path, *, namespace: str, domain_id: int | None,
+                 topics: Sequence[str] | None = None, flush_period_s: float = 0.5,
+                 ready_timeout_s: float = 120.0) -> None:
+        ctx: Any = multiprocessing.get_context(START_METHOD)
+        self.path = Path(path)
+        self.node_name = NODE_NAME
+        from .recorder import default_topics
+
+        self.topics = set(default_topics(namespace)) if topics is None else set(topics)
+        self._conn, child = ctx.Pipe()
+        self._progress = ctx.Array("q", len(INPUT_TYPES), lock=False)
+        self._proc = ctx.Process(
+            target=_serve, name="pmsm-recorder", daemon=False,
+            args=(child, str(path), namespace, domain_id, topics, flush_period_s,
+                  self._progress))
+        self._proc.start()
+        child.close()
+        self.result: dict[str, Any] | None = None
+        kind, text = self._receive(ready_timeout_s, "start")
+        if kind != "ready":
+            self._proc.join(10.0)
+            raise PmsmSysidError(text)
+
+    def _receive(self, timeout_s: float, what: str) -> tuple[str, Any]:
+        if not self._conn.poll(timeout_s):
+            self._end()
+            raise PmsmSysidError(f"the recorder process did not {what} within {timeout_s:g} s")
+        try:
+            return self._conn.recv()  # type: ignore[no-any-return]
+        except EOFError as exc:
+            self._end()
+            raise PmsmSysidError(f"the recorder process ended (exit code "
+                                 f"{self._proc.exitcode}) before it could {what}") from exc
+
+    @property
+    def samples_recorded(self) -> int:
+        """Samples recorded so far: the fewest messages over the input topics."""
+        return int(min(self._progress))
+
+    @property
+    def alive(self) -> bool:
+        return bool(self._proc.is_alive())
+
+    def stop(self, timeout_s: float = 60.0) -> dict[str, Any]:
+        """Take what waits, finalise the bag, end the process; the recorder's summary."""
+        if self.result is not None:
+            return self.result
+        try:
+            self._conn.send(("stop", None))
+        except OSError as exc:
+            self._end()
+            raise PmsmSysidError(f"the recorder process ended early (exit code "
+                                 f"{self._proc.exitcode})") from exc
+        _, summary = self._receive(timeout_s, "finalise the bag")
+        self._proc.join(timeout_s)
+        self._conn.close()
+        self.result = dict(summary)
+        return self.result
+
+    def close(self) -> None:
+        """Stop if still recording (errors ignored: used on the way out); idempotent."""
+        if self.result is None and self._proc.is_alive():
+            with contextlib.suppress(PmsmSysidError):
+                self.stop()
+        self._end()
+
+    def _end(self) -> None:
+        if self._proc.is_alive():
+            self._proc.join(5.0)
+        if self._proc.is_alive():
+            self._proc.kill()
+            self._proc.join(5.0)
