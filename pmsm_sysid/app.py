@@ -70,6 +70,7 @@ class Pipeline:
     stop: threading.Event = field(default_factory=threading.Event)
     recorder: Any = None
     record_result: dict[str, Any] | None = None
+    gfrf_every_model: bool = False
     started: float = field(default_factory=time.monotonic)
 
     @property
@@ -123,15 +124,25 @@ class Pipeline:
         ident = self.identifier
         return ident is None or bool(ident.engine.samples_received >= self.sim.published)
 
+    def _gfrf_caught_up(self) -> bool:
+        """The identifier has fitted and published everything, and the GFRF node has
+        received and analysed (or skipped) every model published."""
+        ident, g = self.identifier, self.gfrf
+        return bool(ident.engine.idle and g.received >= ident.models_published
+                    and g.worker.stats.processed + g.queue.skipped >= g.received)
+
     def _step_sim(self, limit: int | None) -> None:
         """Publish the next burst unless the identifier (or the recorder) is behind (the
-        GFRF node analyses the newest models and counts what it skips). At most ``hop``
+        GFRF node analyses the newest models and counts what it skips; with
+        ``gfrf_every_model`` the sim waits for it too). At most ``hop``
         samples are in flight (published, not yet taken by the identifier) and none is
         published while a window waits for the fitting worker, so at most one window
         becomes due per burst and none is ever skipped."""
         sim, ident = self.sim, self.identifier
         backlog = sim.published - ident.engine.samples_received
         busy = ident.engine.windows_waiting > 0
+        if self.gfrf_every_model and self.gfrf is not None:
+            busy = busy or not self._gfrf_caught_up()
         if self.recorder is not None:
             busy = busy or sim.published - self.recorder.samples_recorded >= RECORD_BACKLOG
         room = min(BACKLOG, ident.engine.config.hop) - backlog
@@ -236,6 +247,7 @@ def build_pipeline(
     sim_params: Mapping[str, Any] | None = None, gfrf_params: Mapping[str, Any] | None = None,
     context: Context | None = None, domain_id: int | None = None, wait_s: float = 0.0,
     ros_args: Sequence[str] | None = None,
+    gfrf_every_model: bool = False,
 ) -> Iterator[Pipeline]:
     """Create ``nodes`` in one process and yield the :class:`Pipeline` (see module doc).
 
@@ -244,6 +256,8 @@ def build_pipeline(
     ``ros_args``: ROS arguments (``--ros-args --params-file F -p name:=value -r a:=b``) for
     the private context (:mod:`.rosargs`); not with a caller's ``context``, whose own
     arguments apply. The keyword arguments here win over them.
+    ``gfrf_every_model``: under the stepped sim clock, also wait for the GFRF node, so it
+    analyses every model (slower: an analysis costs more than a fit).
     """
     from .rosutil import check_namespace, ros_session
 
@@ -261,7 +275,7 @@ def build_pipeline(
                              "given one (pass them to rclpy.init of that context)")
     with _context(context, domain_id, ros_session, ros_args, namespace) as (ctx, executor):
         made: dict[str, Any] = {}
-        pipe = Pipeline(ctx, executor, made, clock)
+        pipe = Pipeline(ctx, executor, made, clock, gfrf_every_model=gfrf_every_model)
         try:
             if "identifier" in names or "gfrf" in names:
                 from .nodes.collector import ResultCollector

@@ -70,7 +70,8 @@ def test_models_ridges_validation_and_a_cogging_change(ros_context: Any) -> None
     with build_pipeline(
             plant=resonant_plant(), excitation="paper-speed", seed=0, clock="sim",
             context=ros_context, sim_params={"amplitude_n": 10.0},
-            identifier_params={"outputs": ["speed"]}, gfrf_params={"orders": [1, 2]}) as pipe:
+            identifier_params={"outputs": ["speed"]}, gfrf_params={"orders": [1, 2]},
+            gfrf_every_model=True) as pipe:
         pipe.run(8.0)  # 4000 samples: windows ending at 1250 .. 4000
         k_on = pipe.sim.published
         res = pipe.sim.set_parameters_atomically(_cogging_parameters())

@@ -206,6 +206,14 @@ class OnlineEngine(Generic[R]):
         return False
 
     @property
+    def idle(self) -> bool:
+        """No window waits or is being fitted, and every result has been drained."""
+        with self._lock:
+            undrained = len(self._results)
+        done = self._worker.stats.processed + self._queue.skipped >= self._queue.put_count
+        return not len(self._queue) and done and not undrained
+
+    @property
     def windows_waiting(self) -> int:
         """Windows queued for the fitting thread (not counting the one being fitted)."""
         return len(self._queue)
