@@ -34,7 +34,7 @@ from rclpy.parameter import Parameter
 
 from .core.errors import PmsmSysidError
 from .core.plant import Plant
-from .topics import DEFAULT_NAMESPACE, INPUT_TYPES
+from .topics import DEFAULT_NAMESPACE
 
 NODES = ("sim", "identifier", "gfrf")
 BACKLOG = 200  # samples the sim may run ahead of the identifier under back-pressure
@@ -432,7 +432,7 @@ def record_summary(pipe: Pipeline) -> dict[str, Any]:
     res = pipe.record_result or {}
     topics: dict[str, int] = res.get("topics", {})
     missing: dict[str, int] = res.get("samples_missing", {})
-    inputs = [t for t in sorted(pipe.recorder.topics) if t.rsplit("/", 1)[-1] in INPUT_TYPES]
+    inputs = pipe.recorder.inputs
     if pipe.sim is not None:
         lost = max((pipe.sim.published - topics.get(t, 0) for t in inputs), default=0)
     elif pipe.identifier is not None:  # received here but not recorded, or skipped stamps

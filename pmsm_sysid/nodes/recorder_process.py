@@ -114,6 +114,7 @@ class RecorderProcess:
         from .recorder import default_topics
 
         self.topics = set(default_topics(namespace)) if topics is None else set(topics)
+        self.inputs = [input_topic(namespace, s) for s in INPUT_TYPES]
         self._conn, child = ctx.Pipe()
         self._progress = ctx.Array("q", len(INPUT_TYPES), lock=False)
         self._proc = ctx.Process(
