@@ -1,13 +1,16 @@
-"""Progress bars for long offline work (large bags, grid evaluation, report figures).
+"""Progress on a terminal for long offline work (simulate, identify, diagnose, report), drawn
+by rich (``rich.progress``).
 
-A bar is drawn on stderr only when stderr is a terminal, so pipes, log files, CI and tests
-stay quiet. ``PMSM_SYSID_PROGRESS=0`` silences bars on a terminal; ``=1`` forces them on
-(e.g. to see them through ``tee``). Standard library only; redraws at most every
-``min_interval`` seconds, so wrapping a tight loop costs little.
+Bars go to stderr and only when stderr is a terminal, so pipes, log files, CI and tests stay
+quiet; ``--quiet`` on a verb (:func:`silence`) or ``PMSM_SYSID_PROGRESS=0`` silences them on
+a terminal, ``PMSM_SYSID_PROGRESS=1`` forces them on (e.g. to see them through ``tee``).
 
-    from pmsm_sysid.progress import progress
+    from pmsm_sysid.progress import activity, progress
     for chunk in progress(chunks, total=len(chunks), label="reading bag"):
         ...
+    with activity("identify") as say:   # one long call: a pulsing bar and the elapsed time
+        fit = identify(bag)
+        say("writing")
 """
 
 from __future__ import annotations
@@ -15,18 +18,37 @@ from __future__ import annotations
 import os
 import sys
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from typing import TextIO, TypeVar
+
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    ProgressColumn,
+    TaskProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 
 T = TypeVar("T")
 ENV = "PMSM_SYSID_PROGRESS"
-WIDTH = 28
+_quiet = False
+
+
+def silence(quiet: bool = True) -> None:
+    """No bars from now on in this process (the verbs' ``--quiet``)."""
+    global _quiet
+    _quiet = quiet
 
 
 def enabled(stream: TextIO | None = None) -> bool:
     """Whether bars are drawn on ``stream`` (default stderr): a TTY, unless overridden."""
     flag = os.environ.get(ENV, "").strip().lower()
-    if flag in ("0", "no", "off", "false"):
+    if flag in ("0", "no", "off", "false") or _quiet:
         return False
     if flag in ("1", "yes", "on", "true"):
         return True
@@ -37,75 +59,62 @@ def enabled(stream: TextIO | None = None) -> bool:
         return False
 
 
-def _clock(seconds: float) -> str:
-    m, s = divmod(int(seconds), 60)
-    return f"{m}:{s:02d}"
-
-
-def render(done: int, total: int | None, label: str, elapsed: float) -> str:
-    """One bar line (without the leading carriage return)."""
-    head = f"{label} " if label else ""
-    if total is None or total <= 0:
-        return f"{head}{done} {_clock(elapsed)}"
-    frac = min(max(done / total, 0.0), 1.0)
-    fill = round(frac * WIDTH)
-    eta = ""
-    if 0 < done < total:
-        eta = f" eta {_clock(elapsed * (total - done) / done)}"
-    return (f"{head}[{'#' * fill}{'.' * (WIDTH - fill)}] {100 * frac:3.0f}% "
-            f"{done}/{total} {_clock(elapsed)}{eta}")
+def _progress(stream: TextIO, counted: bool, auto: bool) -> Progress:
+    columns: list[ProgressColumn | str] = [TextColumn("{task.description}"), BarColumn()]
+    if counted:
+        columns += [TaskProgressColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                    TimeRemainingColumn()]
+    else:
+        columns += [TimeElapsedColumn()]
+    console = Console(file=stream, force_terminal=True, highlight=False, emoji=False)
+    return Progress(*columns, console=console, auto_refresh=auto, transient=False,
+                    refresh_per_second=4)
 
 
 class Bar:
-    """A manual bar: ``update(n)`` adds n done; ``close()`` ends the line."""
+    """A counted bar: ``update(n)`` adds n done; ``close()`` ends the line."""
 
     def __init__(self, total: int | None, label: str = "", stream: TextIO | None = None,
                  min_interval: float = 0.1, force: bool | None = None) -> None:
         self.total = total
         self.label = label
-        self.stream = sys.stderr if stream is None else stream
-        self.on = enabled(self.stream) if force is None else force
+        out = sys.stderr if stream is None else stream
+        self.on = enabled(out) if force is None else force
         self.min_interval = min_interval
         self.done = 0
-        self._t0 = time.monotonic()
         self._last = -1.0
-        self._width = 0
         self._closed = False
+        self._bar: Progress | None = None
+        if self.on:
+            self._bar = _progress(out, counted=True, auto=False)
+            self._task = self._bar.add_task(label, total=total)
+            self._bar.start()
 
     def update(self, n: int = 1) -> None:
         self.done += n
+        if self._bar is None:
+            return
+        self._bar.update(self._task, completed=self.done)
         now = time.monotonic()
-        if self.on and (now - self._last >= self.min_interval or self.done == self.total):
-            self._draw(now)
-
-    def _draw(self, now: float) -> None:
-        self._last = now
-        line = render(self.done, self.total, self.label, now - self._t0)
-        pad = " " * max(0, self._width - len(line))
-        self._width = len(line)
-        try:
-            self.stream.write("\r" + line + pad)
-            self.stream.flush()
-        except (OSError, ValueError):
-            self.on = False
+        if now - self._last >= self.min_interval or self.done == self.total:
+            self._last = now
+            self._bar.refresh()
 
     def finish(self) -> None:
         """All the work is done (a count estimated up front may have been generous)."""
         if self.total is not None:
             self.done = max(self.done, self.total)
+            if self._bar is not None:
+                self._bar.update(self._task, total=self.done, completed=self.done)
         self.close()
 
     def close(self) -> None:
         if self._closed:
             return
         self._closed = True
-        if self.on:
-            self._draw(time.monotonic())
-            try:
-                self.stream.write("\n")
-                self.stream.flush()
-            except (OSError, ValueError):
-                pass
+        if self._bar is not None:
+            self._bar.refresh()
+            self._bar.stop()
 
     def __enter__(self) -> Bar:
         return self
@@ -127,3 +136,26 @@ def progress(iterable: Iterable[T], total: int | None = None, label: str = "",
         for item in iterable:
             yield item
             bar.update()
+
+
+@contextmanager
+def activity(label: str, stream: TextIO | None = None,
+             force: bool | None = None) -> Iterator[Callable[[str], None]]:
+    """A pulsing bar with the elapsed time while long calls run (only on a terminal);
+    yields ``say(stage)`` to name the current stage."""
+    out = sys.stderr if stream is None else stream
+    if not (enabled(out) if force is None else force):
+        yield lambda stage: None
+        return
+    bar = _progress(out, counted=False, auto=True)
+    task = bar.add_task(label, total=None)
+
+    def say(stage: str) -> None:
+        bar.update(task, description=f"{label}: {stage}")
+
+    bar.start()
+    try:
+        yield say
+    finally:
+        bar.update(task, total=1, completed=1)
+        bar.stop()

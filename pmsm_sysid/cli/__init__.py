@@ -101,6 +101,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.verb in ROS_VERBS and ros_missing() is not None:
         print(f"pmsm-sysid {args.verb}: error: this verb {NO_ROS}", file=sys.stderr)
         return 2
+    if getattr(args, "quiet", False):
+        from ..progress import silence
+
+        silence()
     try:
         check_ros_args(ros_args)  # before any work: a missing params file is bad input
         return int(args._run(args))

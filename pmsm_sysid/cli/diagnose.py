@@ -40,6 +40,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="skip the GFRF comparison of the real data's NARX with a noisy "
                         "simulated twin's")
     p.add_argument("--json", metavar="FILE", help="write the diagnose JSON ('-' = stdout)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar on the terminal (there is none when not a terminal)")
     p.add_argument("--corrected-plant", metavar="FILE",
                    help="also write the corrected plant as a YAML plant file")
     p.add_argument("--report", metavar="DIR", help="write figures (PNG) and DIR/index.html")
@@ -47,10 +49,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..api import diagnose
+    from ..progress import activity
 
-    found = diagnose(args.plant, args.real, validate=args.validate, namespace=args.namespace,
-                     alpha=args.alpha, min_share=args.min_share, replay=not args.no_replay,
-                     gfrf=not args.no_gfrf)
+    with activity("diagnose"):
+        found = diagnose(args.plant, args.real, validate=args.validate,
+                         namespace=args.namespace, alpha=args.alpha, min_share=args.min_share,
+                         replay=not args.no_replay, gfrf=not args.no_gfrf)
     real = found.real
     out = sys.stderr if args.json == "-" else sys.stdout
     print(f"diagnose: plant {args.plant} vs recording {args.real} "

@@ -87,6 +87,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("bag", metavar="BAG", help="rosbag2 recording (directory)")
     add_model_options(p)
     p.add_argument("--json", metavar="FILE", help="write the result as JSON ('-' = stdout)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar on the terminal (there is none when not a terminal)")
 
 
 def _table(d: dict[str, Any]) -> str:
@@ -134,8 +136,10 @@ def _alignment_note(report: Any, out: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..api import identify
+    from ..progress import activity
 
-    fit = identify(args.bag, **model_options(args))
+    with activity("identify"):
+        fit = identify(args.bag, **model_options(args))
     d = fit.to_dict()
     out = sys.stderr if args.json == "-" else sys.stdout
     _alignment_note(fit.alignment, out)

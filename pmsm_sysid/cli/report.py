@@ -25,6 +25,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="recording (rosbag2 directory) or a JSON from identify/gfrf/diagnose")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     add_model_options(p.add_argument_group("identification of a recording (as in 'identify')"))
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar on the terminal (there is none when not a terminal)")
     p.add_argument("--json", metavar="FILE",
                    help="write what was written (page, figures, notes) as JSON ('-' = stdout)")
 

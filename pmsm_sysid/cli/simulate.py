@@ -56,6 +56,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--namespace", default="/pmsm", help="topic namespace (default /pmsm)")
     p.add_argument("--force", action="store_true", help="replace an existing bag at --out")
     p.add_argument("--json", metavar="FILE", help="write a summary as JSON ('-' = stdout)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar on the terminal (there is none when not a terminal)")
 
 
 
@@ -67,19 +69,22 @@ def run(args: argparse.Namespace) -> int:
     from ..bagio import write_recording
     from ..core.physics import effective_substeps
     from ..core.plant import plant_to_dict
+    from ..progress import activity
     from .common import replace_bag_dir, write_json
 
     out = Path(args.out)
     if not args.force:
         replace_bag_dir(out, force=False)  # refuses an existing bag before any work
     started = time.perf_counter()
-    sim = simulation_run(args.plant, excitation=args.excitation, duration=args.duration,
-                         seed=args.seed, amplitude=args.amplitude,
-                         excitation_options=dict(args.excitation_option))
-    rec, plant, source = sim.recording, sim.plant, sim.source
-    sim_s = time.perf_counter() - started
-    replace_bag_dir(out, args.force)
-    write_recording(out, rec, namespace=args.namespace, storage=args.storage)
+    with activity("simulate") as say:
+        sim = simulation_run(args.plant, excitation=args.excitation, duration=args.duration,
+                             seed=args.seed, amplitude=args.amplitude,
+                             excitation_options=dict(args.excitation_option))
+        rec, plant, source = sim.recording, sim.plant, sim.source
+        sim_s = time.perf_counter() - started
+        say("writing the recording")
+        replace_bag_dir(out, args.force)
+        write_recording(out, rec, namespace=args.namespace, storage=args.storage)
     total_s = time.perf_counter() - started
     n, fs = len(rec), plant.sample_rate_hz
     summary = {

@@ -194,20 +194,27 @@ def figures(result: DiagnoseResult) -> list[Plot]:
 
 def write_report(result: DiagnoseResult, out_dir: str | Path, title: str = "") -> Path:
     """Save the figures as PNG in ``out_dir`` and write the one-file page ``index.html``."""
+    from ..progress import Bar
     from ..report import diagnose as sections
-    from ..report.html import Section, image, write_page
+    from ..report.html import Image, Section, image, write_page
     from .base import save
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     images = []
-    for plot in figures(result):
-        images.append(image(save(plot, out), plot.caption))
-        plot.figure.clear()
     doc = result.to_dict()
-    pages = sections.json_sections(doc)
-    pages.insert(2, Section("Sim-to-real: figures", tuple(images)))
-    pages[3:3] = sections.effect_sections(doc, result,
-                                          lambda p: image(save(p, out), p.caption))
+    with Bar(4 + bool(result.curves.replay) + len(doc["effects"]), "report") as bar:
+        for plot in figures(result):
+            images.append(image(save(plot, out), plot.caption))
+            plot.figure.clear()
+            bar.update()
+
+        def draw(p: Plot) -> Image:
+            bar.update()
+            return image(save(p, out), p.caption)
+
+        pages = sections.json_sections(doc)
+        pages.insert(2, Section("Sim-to-real: figures", tuple(images)))
+        pages[3:3] = sections.effect_sections(doc, result, draw)
     return write_page(out, f"pmsm-sysid diagnose: {title}" if title else "pmsm-sysid diagnose",
                       pages)
