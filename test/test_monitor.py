@@ -121,7 +121,7 @@ def _busy_view() -> tuple[SysIdView, list[TopicStats]]:
         ("y(k-15)", -1.5415123456789012, 0.61), ("u(k-7)", -0.0022396812345678, 0.2),
         ("const", 3.722021234567e-15, 0.001), ("y(k-18)u(k-26)", -3.9021123e-16, 0.0004),
         ("u(k-3)^2", -1.16551e-18, 0.0001), ("y(k-1)y(k-2)", 0.12345678901234567, 0.1))]
-    v.on_model(json.dumps({"output": "speed", "terms": terms,
+    v.on_model(json.dumps({"output": "speed", "terms": terms, "speed_derived": True,
                            "validation": {"validation": {"r2": 0.9982449120238887}}}))
     v.on_ridges(json.dumps({"stable": False, "h1": {"peaks": [{"freq_hz": 16.66687011718}]},
                             "h2": {"ridges": [{"freq_hz": f} for f in
@@ -158,6 +158,7 @@ def test_view_fits_80_columns_plainly() -> None:
     text = render(_snap(v, topics), 12.3, width=80)
     lines = text.splitlines()
     assert max(len(line) for line in lines) <= 80, max(lines, key=len)
+    assert "speed (derived)" in text  # speed derived from position is marked
     assert "{" not in text and '"' not in text  # no raw JSON
     assert not re.search(r"\d{7,}", text), re.search(r"\d{7,}", text)  # no 16-digit numbers
     assert "-4.08 N" in text and "-0.206 m/s" in text and "0.0739 mm" in text

@@ -126,7 +126,8 @@ def models_table(view: Mapping[str, Any]) -> RenderableType:
         more = f" +{len(terms) - TOP_TERMS}" if len(terms) > TOP_TERMS else ""
         fit = _fit_of(view, output)
         r2 = fit.get("r2", (m.get("validation") or {}).get("r2"))
-        t.add_row(str(output), str(m.get("n_terms", len(terms))), fraction(r2), top + more)
+        name = f"{output} (derived)" if m.get("speed_derived") else str(output)
+        t.add_row(name, str(m.get("n_terms", len(terms))), fraction(r2), top + more)
     return t
 
 

@@ -142,7 +142,8 @@ class SysIdView:
         val = obj.get("validation", {})
         fit = val.get("validation", {}) if isinstance(val, dict) else {}
         self.model = {"output": obj.get("output"), "n_terms": len(terms), "terms": terms,
-                      "validation": fit if isinstance(fit, dict) else {}}
+                      "validation": fit if isinstance(fit, dict) else {},
+                      "speed_derived": bool(obj.get("speed_derived"))}
         self.models[str(obj.get("output"))] = self.model
 
     def on_ridges(self, text: str) -> None:
