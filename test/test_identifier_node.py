@@ -50,9 +50,10 @@ class _Source:
                                                        data_qos())
                          for s, m in make_sample_messages(0, 0, 0, 0).items() if s in INPUT_TYPES}
 
-    def sample(self, k: int, row: np.ndarray) -> None:
+    def sample(self, k: int, row: np.ndarray, signals: tuple[str, ...] | None = None) -> None:
         for sig, msg in self._make(k * PERIOD_NS, *row).items():
-            self.pubs[sig].publish(msg)
+            if signals is None or sig in signals:
+                self.pubs[sig].publish(msg)
 
     def joint(self, k: int, row: np.ndarray, names: list[str]) -> None:
         from sensor_msgs.msg import JointState
@@ -66,6 +67,8 @@ class _Source:
         for col in range(3):
             vals[col][i] = float(row[col])
         msg.effort, msg.velocity, msg.position = vals
+        if np.isnan(row[1]):  # a position-only joint: no velocity array at all
+            msg.velocity = []
         self.pub.publish(msg)
 
 
@@ -77,6 +80,7 @@ def _spin_until(executor: Any, done: Any, timeout: float = 60.0) -> None:
 
 
 def _run(ctx: Any, data: np.ndarray, params: dict[str, Any], joint: list[str] | None = None,
+         signals: tuple[str, ...] | None = None,
          ) -> tuple[Any, list[dict[str, Any]], list[Any], list[Any]]:
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
@@ -98,15 +102,16 @@ def _run(ctx: Any, data: np.ndarray, params: dict[str, Any], joint: list[str] | 
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     ex.add_node(src.node)
+    per = 3 if signals is None else len(signals)
     try:
         end = time.monotonic() + 0.5  # let the subscriptions match before publishing
         while time.monotonic() < end:
             ex.spin_once(timeout_sec=0.05)
         for k, row in enumerate(data):
-            src.joint(k, row, joint) if joint is not None else src.sample(k, row)
+            src.joint(k, row, joint) if joint is not None else src.sample(k, row, signals)
             if k % 50 == 49:
-                _spin_until(ex, lambda k=k: node.engine.aligner.stats.messages >= 3 * (k - 10))
-        n_msgs = 3 * len(data)  # a JointState counts as its three signals
+                _spin_until(ex, lambda k=k: node.engine.aligner.stats.messages >= per * (k - 10))
+        n_msgs = per * len(data)  # a JointState counts as its three signals
         _spin_until(ex, lambda: node.engine.aligner.stats.messages >= n_msgs)
         node.engine.flush()
         assert node.engine.wait_idle(60)
@@ -114,7 +119,8 @@ def _run(ctx: Any, data: np.ndarray, params: dict[str, Any], joint: list[str] | 
         expected = node.models_published
         _spin_until(ex, lambda: len(models) >= expected)
         stats = node.engine.stats
-        return stats, models, vals, node.summary()["errors"]
+        summary = node.summary()
+        return stats, models, vals, summary["errors"] if signals is None else summary
     finally:
         ex.shutdown()
         node.destroy_node()
@@ -193,3 +199,68 @@ def test_bad_parameters_raise_one_clear_error(ros_context: Any, params: dict[str
     with pytest.raises(PmsmSysidError, match=match):
         IdentifierNode(context=ros_context,
                        parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+
+
+def _derived_reference(data: np.ndarray) -> Any:
+    """The offline recording of thrust and position only: speed derived on reading."""
+    from pmsm_sysid.core.align import align_streams
+
+    t = np.arange(len(data)) * PERIOD_NS / 1e9
+    rec, _ = align_streams((t, data[:, 0]), None, (t, data[:, 2]))
+    return rec
+
+
+def test_position_only_topics_give_the_offline_models_of_derived_speed(ros_context: Any) -> None:
+    from pmsm_sysid.core.identify import identify_recording
+
+    data = _data(800, seed=2)
+    stats, models, _, summary = _run(ros_context, data, {}, signals=("thrust", "position"))
+    assert summary["errors"] == [] and summary["speed_derived"] is True
+    assert stats.samples_received == 800 and stats.unaligned == 0
+    ins = summary["inputs"]
+    assert ins["missing"] == ["/pmsm/speed"] and ins["problem"] is None
+    assert ins["speed"] == "derived from position"
+    assert ins["arrived"]["/pmsm/thrust"]["rate_hz"] == pytest.approx(500.0)
+    rec = _derived_reference(data)
+    cfg = FitConfig(structure=Structure(3, 3, 2, 1), n_terms=6, method="ofr")
+    assert len(models) == 2 * 5  # windows ending at 400 .. 800
+    for m in models:
+        a, b = m["window"]["start_index"], m["window"]["stop_index"]
+        assert m["speed_derived"] is (m["output"] == "speed")
+        ref = identify_recording(rec, output=m["output"], config=cfg, estimate=(a, b),
+                                 validate=None)
+        got = NarxModel.from_dict(m)
+        assert got.term_names == ref.model.term_names
+        np.testing.assert_allclose(got.estimates, ref.model.estimates, rtol=1e-12, atol=0)
+
+
+def test_position_only_joint_state_derives_speed(ros_context: Any) -> None:
+    data = _data(500, seed=3)
+    data[:, 1] = np.nan  # no velocity array in the messages
+    stats, models, _, errors = _run(
+        ros_context, data, {"input_layout": "joint_state", "joint_name": "axis"},
+        joint=["axis"])
+    assert errors == [] and stats.samples_received == 500 and stats.samples_dropped == 0
+    rec = _derived_reference(data)
+    speed = [m for m in models if m["output"] == "speed"]
+    assert speed and all(m["speed_derived"] for m in speed)
+    cfg = FitConfig(structure=Structure(3, 3, 2, 1), n_terms=6, method="ofr")
+    a, b = speed[-1]["window"]["start_index"], speed[-1]["window"]["stop_index"]
+    ref = fit_narx(rec.speed[a - 3:b], rec.thrust[a - 3:b], cfg, 500.0)
+    np.testing.assert_allclose(NarxModel.from_dict(speed[-1]).estimates, ref.model.estimates,
+                               rtol=1e-12, atol=0)
+
+
+def test_a_run_without_position_says_so(ros_context: Any) -> None:
+    """Thrust and speed arrive, position never does: nothing can be aligned, and the node
+    says which topic is missing (log, summary) within its report delay."""
+    data = _data(300, seed=4)
+    stats, models, _, summary = _run(ros_context, data, {"inputs_report_s": 0.0},
+                                     signals=("thrust", "speed"))
+    assert stats.samples_received == 0 and models == []
+    ins = summary["inputs"]
+    assert ins["problem"] == "no messages on /pmsm/position: nothing could be aligned"
+    assert ins["missing"] == ["/pmsm/position"]
+    assert set(ins["arrived"]) == {"/pmsm/thrust", "/pmsm/speed"}
+    assert summary["input_log"] and summary["input_log"][-1].startswith(
+        "no messages on /pmsm/position: nothing could be aligned (inputs: /pmsm/thrust 500 Hz")

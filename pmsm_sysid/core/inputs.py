@@ -88,6 +88,7 @@ class InputAligner:
         self.ignored = 0  # speed messages not used because speed is derived
         self._unaligned = 0  # counted before the inner aligner exists
         self._emitted = 0
+        self._messages = 0  # a whole sample (JointState) counts as one per signal
         self.mode = "undecided"
         if speed_source == "measured" or not derivable:
             self._decide("measured")
@@ -111,9 +112,8 @@ class InputAligner:
     def stats(self) -> AlignStats:
         inner = self._inner.stats if self._inner is not None else AlignStats(0, 0, 0, 0, 0,
                                                                               0, 0)
-        held = sum(len(v) for _, _, v in self._held)
         return AlignStats(
-            messages=inner.messages + held + self.ignored + self._unaligned,
+            messages=self._messages,
             samples=self._emitted, unaligned=inner.unaligned + self.ignored + self._unaligned,
             out_of_order=inner.out_of_order, duplicates=inner.duplicates, gaps=inner.gaps,
             samples_missing=inner.samples_missing, restarts=inner.restarts,
@@ -124,6 +124,7 @@ class InputAligner:
         if signal not in self.counts:
             raise DataError(f"unknown signal '{signal}' (expected one of {self.signals})")
         self.counts[signal].add(stamp_ns)
+        self._messages += 1
         if self.mode == "derived" and signal == "speed":
             self.ignored += 1
             return []
@@ -138,6 +139,7 @@ class InputAligner:
             raise DataError(f"sample has {len(values)} values, expected {len(self.signals)}")
         for s in self.signals:
             self.counts[s].add(stamp_ns)
+        self._messages += len(self.signals)
         vals = tuple(float(v) for v in values)
         if self.mode == "undecided":
             has_speed = "speed" in self.signals and math.isfinite(
@@ -147,6 +149,7 @@ class InputAligner:
 
     def count_unaligned(self, n_messages: int) -> None:
         """Messages that carried no usable sample (e.g. a JointState without the joint)."""
+        self._messages += n_messages
         if self._inner is not None:
             self._inner.count_unaligned(n_messages)
         else:

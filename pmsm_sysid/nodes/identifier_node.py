@@ -115,6 +115,7 @@ class IdentifierNode(Node):
             self._input_topics = self._layout(p)
             self._started = time.monotonic()
             self._inputs_logged: tuple[Any, ...] | None = None
+            self.input_log: list[str] = []  # the lines logged about the inputs (latest 20)
             self._subscribe(p)
         except BaseException:
             self.engine.stop()  # ends the worker process
@@ -234,6 +235,8 @@ class IdentifierNode(Node):
         key = (tuple(rep.arrived), rep.speed, rep.problem, rep.samples > 0)
         if key != self._inputs_logged:
             self._inputs_logged = key
+            self.input_log.append(rep.line())
+            del self.input_log[:-20]
             log = self.get_logger()  # type: ignore[no-untyped-call]
             if rep.problem:
                 log.warning(rep.line())
@@ -317,7 +320,8 @@ class IdentifierNode(Node):
     def summary(self) -> dict[str, Any]:
         """Counters and the latest results (the ``run --json`` summary's identifier part)."""
         return {**self.engine.stats.to_dict(), "inputs": self.input_report().to_dict(),
-                "speed_derived": self.engine.aligner.speed_derived, "input_stale": self.stale,
+                "speed_derived": self.engine.aligner.speed_derived,
+                "input_log": list(self.input_log), "input_stale": self.stale,
                 "stale_events": self.stale_events, "last_input_age_s": self.input_age_s(),
                 "models": dict(self.last["models"]),
                 "validation": dict(self.last["validation"]),
