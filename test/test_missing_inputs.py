@@ -38,9 +38,10 @@ def test_a_run_with_no_inputs_names_the_topics_it_waited_for(ros_env: int,
 
 def test_a_replay_nobody_listens_to_says_so(ros_env: int, tmp_path: Path) -> None:
     repo = Path(__file__).resolve().parents[1]
-    proc = subprocess.run([*CLI, "replay", str(repo / "bags" / "paper_speed_nominal"), "--wait", "0.5", "--fast",
-                           "--json", "-"], env=_env(ros_env, tmp_path),
-                          capture_output=True, text=True, timeout=180)
+    bag = repo / "bags" / "paper_speed_nominal"
+    proc = subprocess.run([*CLI, "replay", str(bag), "--wait", "0.5", "--fast", "--json", "-"],
+                          env=_env(ros_env, tmp_path), capture_output=True, text=True,
+                          timeout=180)
     assert proc.returncode == 0, proc.stderr
     s = json.loads(proc.stdout)
     assert s["messages"] > 0 and set(s["subscribers"].values()) == {0}
