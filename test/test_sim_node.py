@@ -241,7 +241,7 @@ def test_run_time_rate_excitation_and_rejections(ros_context: Any) -> None:
         assert sim.set_parameters([Parameter("rate", value=2.0)])[0].successful
         assert sim._timer_period() == 0.001
         sim.stop_timer()
-        for name, value, reason in [("clock", "wall", "cannot change"),
+        for name, value, reason in [("clock", "wall", "read-only parameter: clock"),
                                     ("mass_kg", -1.0, "mass_kg must be > 0"),
                                     ("excitation", "sine", "unknown excitation"),
                                     ("rate", -1.0, "rate must be >= 0")]:

@@ -403,6 +403,23 @@ class WindowScheduler:
         self.samples = 0
         self.windows = 0
 
+    def resize(self, window: int, hop: int, history: int) -> None:
+        """New window, hop and history from the next sample on. The newest contiguous
+        samples are kept (as many as the new ring holds), so the next window is cut as soon
+        as the new ring is full of contiguous data and the hop grid says so."""
+        if window < 2 or hop < 1 or history < 0:
+            raise DataError(f"need window >= 2, hop >= 1, history >= 0 (got {window}, {hop}, "
+                            f"{history})")
+        capacity = window + history
+        keep = min(self._run, self.capacity, capacity)
+        order = np.r_[self._head:self.capacity, 0:self._head][self.capacity - keep:]
+        stamps = np.zeros(capacity, dtype=np.int64)
+        values = np.zeros((capacity, self._values.shape[1]), dtype=np.float64)
+        stamps[:keep], values[:keep] = self._stamps[order], self._values[order]
+        self._stamps, self._values = stamps, values
+        self._head, self._run = keep % capacity, keep
+        self.window, self.hop, self.history, self.capacity = window, hop, history, capacity
+
     def push(self, sample: Sample) -> Window | None:
         """Store ``sample``; return the window it completes, if any."""
         contiguous = self._last_index is not None and sample.index == self._last_index + 1

@@ -32,12 +32,13 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, String
 
-from ..core.errors import GfrfError
+from ..core.errors import DataError, GfrfError
 from ..core.fitqueue import FitWorker, LatestQueue
 from ..core.gfrf_message import MessageAnalyser, analyse_message
 from ..core.workerproc import ProcessWorker
 from ..topics import DEFAULT_NAMESPACE, MODEL, RIDGE_FREQUENCIES, RIDGES, VALIDATION
 from .gfrf_msgs import ridges_message, validation_message
+from .params import GFRF_SPECS, check_orders, declare_all
 
 DEFAULTS: dict[str, Any] = {"queue_size": 1, "orders": [1, 2, 3], "publish_period_s": 0.05,
                             "worker": "process"}
@@ -54,10 +55,11 @@ class GfrfNode(Node):
                  parameter_overrides: list[Parameter] | None = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides or [])
-        p = {k: self.declare_parameter(k, v).value for k, v in DEFAULTS.items()}
-        orders = tuple(int(o) for o in p["orders"])
-        if not orders or any(o not in (1, 2, 3) for o in orders):
-            raise GfrfError(f"parameter orders must be among 1, 2, 3 (got {list(orders)})")
+        p = declare_all(self, DEFAULTS, GFRF_SPECS)
+        try:
+            self.orders = check_orders(p["orders"])
+        except DataError as exc:
+            raise GfrfError(str(exc)) from exc
         self._lock = threading.Lock()
         self._done: deque[dict[str, Any]] = deque(maxlen=16)
         self._errors: deque[str] = deque(maxlen=20)
@@ -65,6 +67,7 @@ class GfrfNode(Node):
         self.published = 0
         self.last_ridges: dict[str, Any] | None = None
         self.last_validation: dict[str, Any] | None = None
+        orders = self.orders
         if p["worker"] not in ("process", "thread"):
             raise GfrfError(f"parameter worker must be 'process' or 'thread' (got "
                             f"'{p['worker']}')")

@@ -28,6 +28,7 @@ from collections.abc import Callable
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -37,7 +38,7 @@ from std_msgs.msg import String
 
 from ..bagio.cdr import decode_stamped
 from ..core.engine import EngineConfig, OnlineEngine, WindowError
-from ..core.errors import DataError
+from ..core.errors import DataError, PmsmSysidError
 from ..core.gfrf_analysis import json_safe
 from ..core.inputs import InputReport, describe_inputs
 from ..core.online import Window
@@ -45,6 +46,13 @@ from ..core.tracker import TrackerConfig, WindowResult, WindowTracker, tracker_c
 from ..core.workerproc import ProcessWorker
 from ..rosutil import data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
 from ..topics import CHANGE, DEFAULT_NAMESPACE, INPUT_TYPES, MODEL, VALIDATION
+from .params import (
+    IDENTIFIER_SPECS,
+    TRACKER_KEYS,
+    SwitchableProcessor,
+    check_identifier,
+    declare_all,
+)
 
 OK, WARN = DiagnosticStatus.OK, DiagnosticStatus.WARN
 DRAIN_ROUNDS = 100  # at most 300 input messages taken per subscription callback
@@ -73,6 +81,11 @@ def fit_processor(config: TrackerConfig, where: str) -> Callable[[Window], Windo
     return ProcessWorker[Window, WindowResult](WindowTracker, (config,), method="process")
 
 
+def _shape(w: Window) -> tuple[int, int]:
+    """(samples, history) of a window: which settings it was cut with."""
+    return (w.stop_index - w.start_index, w.history)
+
+
 def status(name: str, level: bytes, message: str, hardware_id: str,
            values: dict[str, Any]) -> DiagnosticStatus:
     """A DiagnosticStatus with ``values`` as strings (floats with full precision)."""
@@ -90,18 +103,21 @@ class IdentifierNode(Node):
                  parameter_overrides: list[Parameter] | None = None) -> None:
         super().__init__(node_name, context=context, namespace=namespace,
                          parameter_overrides=parameter_overrides or [])
-        p = {k: self.declare_parameter(k, v).value for k, v in DEFAULTS.items()}
+        p = declare_all(self, DEFAULTS, IDENTIFIER_SPECS)
+        check_identifier(p)
         self.params = p
         config = tracker_config(p)
         if p["fit_worker"] not in FIT_WORKERS:
             raise DataError(f"fit_worker must be 'process' or 'thread', got '{p['fit_worker']}'")
+        self._fit = SwitchableProcessor(fit_processor(config, p["fit_worker"]), _shape)
         self.engine: OnlineEngine[WindowResult] = OnlineEngine(
             EngineConfig(window=int(p["window"]), hop=int(p["hop"]),
                          history=config.history, queue_size=int(p["queue_size"]),
                          sample_rate_hz=float(p["sample_rate_hz"]),
                          tolerance_s=float(p["tolerance_s"]),
                          speed_source=str(p["speed_source"])),
-            fit_processor(config, p["fit_worker"]), speed_expected=self._speed_published)
+            self._fit, speed_expected=self._speed_published)
+        self.settings_changes = 0
         self.last: dict[str, Any] = {"models": {}, "validation": {}, "changes": []}
         self.models_published = 0
         self.errors: list[str] = []
@@ -121,7 +137,38 @@ class IdentifierNode(Node):
             self.engine.stop()  # ends the worker process
             raise
         self._timer = self.create_timer(float(p["publish_period_s"]), self.publish_results)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         self.engine.start()
+
+    # ------------------------------------------------------------------ live parameters
+    def _processor(self, config: TrackerConfig) -> Callable[[Window], WindowResult]:
+        return fit_processor(config, str(self.params["fit_worker"]))
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """Validate a change as a whole; apply it to the next windows (see :mod:`.params`)."""
+        changes = {p.name: p.value for p in params}
+        try:
+            self._apply(changes)
+        except PmsmSysidError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply(self, changes: dict[str, Any]) -> None:
+        candidate = {**self.params, **{k: v for k, v in changes.items() if k in self.params}}
+        for k, v in candidate.items():
+            if isinstance(v, (list, tuple)) or type(v).__name__ == "array":
+                candidate[k] = list(v)
+        check_identifier(candidate)
+        if TRACKER_KEYS & changes.keys():
+            config = tracker_config(candidate)
+            EngineConfig(window=config.window, hop=config.hop, history=config.history)
+            self.engine.scheduler.resize(config.window, config.hop, config.history)
+            self._fit.switch(self._processor(config), (config.window, config.history))
+            self.settings_changes += 1
+        self.params = candidate
+        self.get_logger().info(  # type: ignore[no-untyped-call]
+            f"parameters changed: {', '.join(f'{k}={changes[k]}' for k in sorted(changes))} "
+            "(fits: from the next window on)")
 
     def _subscribe(self, p: dict[str, Any]) -> None:
         if p["input_layout"] == "topics":

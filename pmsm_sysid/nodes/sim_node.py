@@ -52,6 +52,7 @@ from ..core.physics import MotorSimulator
 from ..core.plant import EFFECT_BLOCKS, Plant, nominal_plant, plant_from_dict, plant_to_dict
 from ..rosutil import data_qos, make_sample_messages, seconds_to_ns, stamp_from_ns
 from ..topics import DEFAULT_NAMESPACE, INPUT_TYPES, POSITION, SPEED, THRUST
+from .params import declare_all, sim_specs
 
 ParamValue = bool | int | float | str
 FIXED = ("sample_rate_hz", "seed", "clock", "frame_id")
@@ -189,8 +190,7 @@ class MotorSimNode(Node):
             "seed": int(seed), "clock": clock, "rate": float(rate),
             "burst": int(burst), "max_samples": int(max_samples), "frame_id": frame_id,
         }
-        self.values = {name: self.declare_parameter(name, value).value
-                       for name, value in defaults.items()}
+        self.values = declare_all(self, defaults, sim_specs(list(defaults)))
         check_run_values(self.values)
         v = self.values
         self.stepper = SampleStepper(plant_from_parameters(v), v["excitation"], v["seed"],
