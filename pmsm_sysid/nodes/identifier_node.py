@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -161,7 +162,8 @@ class IdentifierNode(Node):
         check_identifier(candidate)
         if TRACKER_KEYS & changes.keys():
             config = tracker_config(candidate)
-            EngineConfig(window=config.window, hop=config.hop, history=config.history)
+            self.engine.config = replace(self.engine.config, window=config.window,
+                                         hop=config.hop, history=config.history)
             self.engine.scheduler.resize(config.window, config.hop, config.history)
             self._fit.switch(self._processor(config), (config.window, config.history))
             self.settings_changes += 1
