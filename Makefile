@@ -16,7 +16,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
-.PHONY: venv demo test lint typecheck bags bench docs clean
+.PHONY: venv demo test lint typecheck bags bench docs colcon clean
 
 venv: $(STAMP)
 
@@ -43,6 +43,10 @@ bags: $(STAMP)
 bench: $(STAMP)
 	$(PY) bench/ofr_bench.py
 	$(PY) bench/gfrf_bench.py
+
+# colcon build of this package as ament_python in a temporary workspace (also part of `test`)
+colcon: $(STAMP)
+	$(PY) -m pytest -q -p no:cacheprovider test/test_colcon.py
 
 docs: $(STAMP)
 	$(PY) scripts/api_docs.py docs/api

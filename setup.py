@@ -21,7 +21,8 @@ setup(
                       "rich"],
     extras_require={
         "test": ["pytest", "pytest-xdist", "pytest-timeout", "hypothesis", "ruff", "mypy",
-                 "types-PyYAML", "scipy-stubs", "pdoc"],
+                 "types-PyYAML", "scipy-stubs", "pdoc", "colcon-core", "colcon-ros",
+                 "colcon-python-setup-py"],
         # the live verbs (run, record, replay, monitor) and the nodes: ROS 2 Jazzy wheels;
         # not needed where a ROS 2 Jazzy installation is sourced
         "ros": ["ros-jazzy-rclpy~=7.1", "ros-jazzy-rmw-fastrtps-cpp~=8.4",

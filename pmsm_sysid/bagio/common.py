@@ -64,8 +64,10 @@ class LoadedRecording:
 def schema_dir() -> Path:
     """Directory holding the package's ``msg_schemas/*.msg`` (source tree or installed share)."""
     here = Path(__file__).resolve().parent
-    candidates = [here.parents[1] / "msg_schemas",
-                  Path(sys.prefix) / "share" / "pmsm_sysid" / "msg_schemas"]
+    candidates = [here.parents[1] / "msg_schemas"]
+    if len(here.parents) > 4:  # <prefix>/lib/pythonX.Y/site-packages/pmsm_sysid/bagio
+        candidates.append(here.parents[4] / "share" / "pmsm_sysid" / "msg_schemas")
+    candidates.append(Path(sys.prefix) / "share" / "pmsm_sysid" / "msg_schemas")
     for prefix in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep):
         if prefix:
             candidates.append(Path(prefix) / "share" / "pmsm_sysid" / "msg_schemas")
