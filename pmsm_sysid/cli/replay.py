@@ -23,6 +23,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--wait", type=float, default=10.0, metavar="S",
                    help="wait up to S seconds for subscribers on the input topics before "
                         "starting (default 10; 0 = start at once)")
+    p.add_argument("--subscribers", type=int, default=1, metavar="N",
+                   help="wait for N subscribers on each input topic (default 1; e.g. 2 for an "
+                        "identifier that also records)")
     p.add_argument("--burst", type=int, default=500, metavar="N",
                    help="with --fast: messages per topic per burst (default 500)")
     p.add_argument("--drain-rate", type=float, default=5000.0, metavar="MSG_PER_S",
@@ -42,14 +45,17 @@ def _check(args: argparse.Namespace) -> float:
         raise PmsmSysidError(f"--loop must be >= 0, got {args.loop}")
     if args.wait < 0:
         raise PmsmSysidError(f"--wait must be >= 0, got {args.wait}")
+    if args.subscribers < 1:
+        raise PmsmSysidError(f"--subscribers must be >= 1, got {args.subscribers}")
     if args.burst < 1 or not args.drain_rate > 0:
         raise PmsmSysidError("--burst must be >= 1 and --drain-rate > 0")
     return rate
 
 
-def _topic_line(topic: str, messages: int, subscribers: int) -> str:
+def _topic_line(topic: str, messages: int, subscribers: int, at_start: int) -> str:
     who = {0: "no subscriber", 1: "1 subscriber"}.get(subscribers, f"{subscribers} subscribers")
-    return f"{topic} {messages} to {who}"
+    late = f" ({at_start} when it began)" if at_start < subscribers else ""
+    return f"{topic} {messages} to {who}{late}"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -68,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
         node = session.add(ReplayerNode(
             args.bag, context=session.context, rate=rate, loops=args.loop,
             namespace=namespace, wait_s=args.wait, burst=args.burst,
-            drain_rate=args.drain_rate))
+            subscribers=args.subscribers, drain_rate=args.drain_rate))
         for topic, msgtype in sorted(node.skipped.items()):
             print(f"replay: skipping {topic} ({msgtype}: no Python type for it here)",
                   file=sys.stderr)
@@ -78,20 +84,24 @@ def run(args: argparse.Namespace) -> int:
         start = time.monotonic()
         session.spin_until(lambda: node.finished)
         if not node.stats.matched:
-            print(f"replay: no subscriber on {', '.join(node.wait_for)} after {args.wait:g} s; "
-                  "published anyway", file=sys.stderr)
+            had = min(node.stats.at_start.get(t, 0) for t in node.wait_for)
+            print(f"replay: {had} of {args.subscribers} subscriber(s) on "
+                  f"{', '.join(node.wait_for)} after {args.wait:g} s; published anyway",
+                  file=sys.stderr)
         node.flush_acks(2.0)
         seconds = time.monotonic() - start
         stats = node.stats
     total = sum(stats.counts.values())
     listeners = {t: stats.listeners.get(t, 0) for t in sorted(node.remap.values())}
+    per_topic = ", ".join(_topic_line(t, stats.counts.get(t, 0), n, stats.at_start.get(t, 0))
+                          for t, n in listeners.items())
     print(f"replayed {args.bag}: {total} messages in {stats.passes} pass(es), {seconds:.1f} s "
-          f"({', '.join(_topic_line(t, stats.counts.get(t, 0), n) for t, n in listeners.items())})",
-          file=info, flush=True)
+          f"({per_topic})", file=info, flush=True)
     if not any(listeners.get(t) for t in node.wait_for):
         print(f"replay: nobody listened: no subscriber on {', '.join(node.wait_for)} while "
               "replaying", file=sys.stderr)
     write_json({"bag": str(args.bag), "messages": total, "topics": dict(stats.counts),
-                "subscribers": listeners, "passes": stats.passes, "seconds": seconds,
+                "subscribers": listeners, "subscribers_at_start": stats.at_start,
+                "passes": stats.passes, "seconds": seconds,
                 "matched": stats.matched, "interrupted": not node.finished}, args.json)
     return 0

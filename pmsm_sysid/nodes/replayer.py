@@ -3,10 +3,10 @@
 The CDR bytes go out unchanged (rclpy publishers accept ``bytes``), so a replayed message is
 bit-for-bit the recorded one. Phases, driven by a 1 ms timer:
 
-1. **wait** until every topic to wait for has a matched subscription (the publisher's DDS
-   ``matched`` event, not the graph cache, which can run ahead of the DDS match and lose the
-   first messages), or ``wait_s`` has passed; then **settle** ``settle_s`` more so that the
-   subscribers' side of the discovery completes too;
+1. **wait** until every topic to wait for has ``subscribers`` matched subscriptions (the
+   publisher's DDS ``matched`` event, not the graph cache, which can run ahead of the DDS
+   match and lose the first messages), or ``wait_s`` has passed; then **settle**
+   ``settle_s`` more so that the subscribers' side of the discovery completes too;
 2. **play**: paced by the bag timestamps x 1/``rate``; with ``rate = 0`` as fast as the
    subscribers' queues allow: bursts of at most ``burst`` messages per topic, each followed by
    a pause long enough for a subscriber that drains ``drain_rate`` messages per second. A
@@ -139,6 +139,7 @@ class ReplayStats:
 
     counts: Counter[str] = field(default_factory=Counter)
     listeners: Counter[str] = field(default_factory=Counter)  # most subscribers at once
+    at_start: dict[str, int] = field(default_factory=dict)  # subscribers when playing began
     passes: int = 0
     waited_s: float = 0.0
     matched: bool = False
@@ -150,6 +151,7 @@ class ReplayerNode(Node):
     def __init__(self, path: str | Path, *, context: Context | None = None,
                  rate: float = 1.0, loops: int = 1, namespace: str | None = None,
                  wait_s: float = 10.0, settle_s: float = 0.25, linger_s: float = 1.0,
+                 subscribers: int = 1,
                  burst: int = 500, drain_rate: float = 5000.0,
                  node_name: str = "pmsm_replay") -> None:
         topics, skipped = publishable(bag_topics(Path(path)))
@@ -162,6 +164,7 @@ class ReplayerNode(Node):
         self.path = Path(path)
         self.rate, self.loops, self.burst, self.drain_rate = rate, loops, burst, drain_rate
         self.wait_s, self.settle_s, self.linger_s = wait_s, settle_s, linger_s
+        self.subscribers = max(1, subscribers)
         self.topics, self.skipped, self.remap = topics, skipped, remap
         self.headers = {t: has_header(ty) for t, ty in self.topics.items()}
         self.offset_ns = loop_offset_ns(self.path, self.headers) if loops != 1 else 0
@@ -191,13 +194,14 @@ class ReplayerNode(Node):
     def _on_timer(self) -> None:
         now = time.monotonic()
         if self._phase == "wait":
-            ready = all(self.matched.get(t, 0) >= 1 for t in self.wait_for)
+            ready = all(self.matched.get(t, 0) >= self.subscribers for t in self.wait_for)
             if ready or now - self._phase_t >= self.wait_s:
                 self.stats.matched, self.stats.waited_s = ready, now - self._phase_t
                 self._phase, self._phase_t = "settle", now
         elif self._phase == "settle":
             if now - self._phase_t >= self.settle_s:
                 self._phase = "play"
+                self.stats.at_start = {t: self.matched.get(t, 0) for t in self.remap.values()}
                 self._start_pass(0)
         elif self._phase == "play":
             if now >= self._resume:
