@@ -38,6 +38,8 @@ from ..core.gfrf_message import MessageAnalyser, analyse_message
 from ..core.workerproc import ProcessWorker
 from ..topics import DEFAULT_NAMESPACE, MODEL, RIDGE_FREQUENCIES, RIDGES, VALIDATION
 from .gfrf_msgs import ridges_message, validation_message
+from .health import HealthPublisher, gfrf_health
+from .numbers import NumberPublisher
 from .params import GFRF_SPECS, check_orders, declare_all
 
 DEFAULTS: dict[str, Any] = {"queue_size": 1, "orders": [1, 2, 3], "publish_period_s": 0.05,
@@ -83,6 +85,8 @@ class GfrfNode(Node):
         self._ridges_pub = self.create_publisher(String, RIDGES, 10)
         self._array_pub = self.create_publisher(Float64MultiArray, RIDGE_FREQUENCIES, 10)
         self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION, 10)
+        self.numbers = NumberPublisher(self)
+        self.health = HealthPublisher(self, "gfrf", gfrf_health(self))
         self.create_subscription(String, MODEL, self._on_model, 10)
         self._timer = self.create_timer(float(p["publish_period_s"]), self.publish_results)
         self.worker.start()
@@ -111,6 +115,7 @@ class GfrfNode(Node):
             gfrf, model = r["gfrf"], r["model"]
             self._ridges_pub.publish(String(data=json.dumps(gfrf, allow_nan=False)))
             self._array_pub.publish(ridges_message(gfrf))
+            self.numbers.ridges(gfrf)
             self._val_pub.publish(validation_message(model, gfrf, self._stamp(model)))
             self.last_ridges = gfrf
             self.last_validation = model.get("validation")

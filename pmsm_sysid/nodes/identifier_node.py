@@ -47,6 +47,8 @@ from ..core.tracker import TrackerConfig, WindowResult, WindowTracker, tracker_c
 from ..core.workerproc import ProcessWorker
 from ..rosutil import data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
 from ..topics import CHANGE, DEFAULT_NAMESPACE, INPUT_TYPES, MODEL, VALIDATION
+from .health import HealthPublisher, IdentifierHealth
+from .numbers import NumberPublisher
 from .params import (
     IDENTIFIER_SPECS,
     TRACKER_KEYS,
@@ -128,6 +130,9 @@ class IdentifierNode(Node):
         self._model_pub = self.create_publisher(String, MODEL, 50)
         self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION, 50)
         self._change_pub = self.create_publisher(DiagnosticArray, CHANGE, 50)
+        self.numbers = NumberPublisher(self)
+        self.health_report = IdentifierHealth(self)
+        self.health = HealthPublisher(self, "identifier", self.health_report)
         try:
             self._input_topics = self._layout(p)
             self._started = time.monotonic()
@@ -315,6 +320,10 @@ class IdentifierNode(Node):
             self._model_pub.publish(String(data=json.dumps(json_safe(model), allow_nan=False)))
             self.last["models"][model["output"]] = model
             self.models_published += 1
+            self.numbers.model(model)
+        self.health_report.note(r)
+        for d in r.decisions:
+            self.numbers.decision(d)
         stamp = stamp_from_ns(round(r.end_stamp * 1e9))
         if r.validations:
             score = {d["output"]: d for d in r.decisions}  # the change detector, per output
@@ -325,6 +334,7 @@ class IdentifierNode(Node):
             self._val_pub.publish(arr)
             for v in r.validations:
                 self.last["validation"][v["output"]] = v
+                self.numbers.validation(v)
         if r.changes:
             arr = DiagnosticArray(status=[self._change_status(c) for c in r.changes])
             arr.header.stamp = stamp

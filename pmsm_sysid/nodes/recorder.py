@@ -40,6 +40,7 @@ from ..topics import (
     stat_topic,
     topic_name,
 )
+from .health import HealthPublisher, recorder_health
 
 STAT_OUTPUTS = ("speed", "position")  # outputs whose plottable numbers are recorded by default
 DRAIN_ROUNDS = 100
@@ -93,6 +94,7 @@ class RecorderNode(Node):
             if msgtype is not None:
                 self._subscribe(topic, msgtype, reliable=True)
         self.create_timer(flush_period_s, recorder.flush)
+        self.health = HealthPublisher(self, "record", recorder_health(self))
         if self.pending:
             self.create_timer(0.25, self._discover)
 

@@ -38,6 +38,7 @@ from ..bagio import RawMessage, bag_topics, iter_raw
 from ..core.errors import BagError
 from ..rosutil import data_qos, message_class
 from ..topics import INPUT_TYPES
+from .health import HealthPublisher, replay_health
 
 # --- planning (no ROS) --------------------------------------------------------------------
 
@@ -179,6 +180,7 @@ class ReplayerNode(Node):
         self._t0: tuple[float, int] | None = None  # (monotonic, first bag time) of playback
         self._resume = 0.0
         self._timer = self.create_timer(0.001, self._on_timer)
+        self.health = HealthPublisher(self, "replay", replay_health(self))
 
     def _publisher(self, topic: str, msgtype: str) -> Any:
         out = self.remap[topic]

@@ -52,6 +52,7 @@ from ..core.physics import MotorSimulator
 from ..core.plant import EFFECT_BLOCKS, Plant, nominal_plant, plant_from_dict, plant_to_dict
 from ..rosutil import data_qos, make_sample_messages, seconds_to_ns, stamp_from_ns
 from ..topics import DEFAULT_NAMESPACE, INPUT_TYPES, POSITION, SPEED, THRUST
+from .health import HealthPublisher, sim_health
 from .params import declare_all, sim_specs
 
 ParamValue = bool | int | float | str
@@ -207,6 +208,7 @@ class MotorSimNode(Node):
         self._pace_start = (time.monotonic(), 0)
         self._timer = self.create_timer(self._timer_period(), self._on_timer)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.health = HealthPublisher(self, "sim", sim_health(self))
 
     @property
     def input_publishers(self) -> list[Any]:
