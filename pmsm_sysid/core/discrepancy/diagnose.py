@@ -44,7 +44,9 @@ from .kinematics import (
 )
 from .library import Effect
 from .modelling import Alternative, Model, confirmed_model
+from .nonparam import AxisModel
 from .result import Curves, DiagnoseResult, FoundEffect, capped
+from .rival import AXIS_EFFECTS, Rival, as_found, rivals
 from .select import ALPHA, MAX_EFFECTS, MIN_SHARE, Candidates, forward_select, score_step
 from .showfit import fit_table, replay_notes, scan_unexplained, where_table
 from .stats import ar_whitener, lstsq, whiten
@@ -231,11 +233,18 @@ def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
     final, fdata = _final(model, segs)
     final, held = _prune(final, fdata, held, n_tests, opts.alpha)
     found = _named(final, fdata, plant, list(held), model.alternatives, n_tests, opts)
-    found += scan_unexplained(final, fdata, opts.alpha, opts.min_share)
+    curves = scan_unexplained(final, fdata, opts.alpha, opts.min_share,
+                              (model.fit, segs.est), segs.val, not closed)
+    rv = rivals(model.fit, segs.est, segs.val, not closed, opts.alpha)
+    found = _cap(found, curves, rv)
+    beaten = {r.axis for r in rv}
+    found += [e for e, _ in curves if e.params.get("axis") not in beaten]
+    found += [as_found(r) for r in rv]
+    extra = _best_curve(curves)
     corrected, notes = _correct(plant, [(e.name, e.params) for e in found])
     est_plant, _ = _correct(plant, [(e.name, effect_params(model.fit, k, plant)[0])
                                     for k, e in enumerate(model.fit.effects)])
-    table, replays = fit_table(plant, est_plant, model.fit, segs, opts.replay)
+    table, replays = fit_table(plant, est_plant, model.fit, segs, opts.replay, extra)
     notes += replay_notes(table, [e.name for e in model.fit.effects])
     notes += [f"{e.label()} was significant on the estimation data but not confirmed on "
               "held-out data; it is not reported" for e in dropped]
@@ -250,6 +259,31 @@ def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
         ["nrmse_before"], fit=table, candidates=tuple(_rank_dict(s) for s in ranking),
         method=method, notes=tuple(notes), curves=_curves(segs, model.fit, replays),
         gfrf=gfrf)
+
+
+def _cap(found: list[FoundEffect], curves: list[tuple[FoundEffect, AxisModel]],
+         rv: list[Rival]) -> list[FoundEffect]:
+    """No 'high' for a library effect when a curve confirmed on held-out data explains
+    what is left on its axis, or explains it better than the effect: the library was not
+    the best explanation there."""
+    axes = {m.axis for e, m in curves if e.held_out is not None and e.held_out.significant}
+    near = {n for a in axes for n in AXIS_EFFECTS.get(a, ())}
+    near |= {n for r in rv for n in r.replaced}
+    out = []
+    for e in found:
+        if e.name in near and e.confidence == "high":
+            e = replace(e, confidence="moderate", notes=(*e.notes, (
+                "an unexplained force remains on its axis and a curve explains held-out "
+                "data better than this effect alone: it is part of the story at most")))
+        out.append(e)
+    return out
+
+
+def _best_curve(curves: list[tuple[FoundEffect, AxisModel]]) -> AxisModel | None:
+    """The confirmed unexplained curve that lowers the held-out error most (for the fit)."""
+    ok = [(e.held_out.reduction, m) for e, m in curves
+          if e.held_out is not None and e.held_out.significant]
+    return max(ok, key=lambda t: t[0])[1] if ok else None
 
 
 def _final(model: Model, segs: Segments) -> tuple[Fit, EquationData]:

@@ -139,7 +139,7 @@ def _sincos(t: FloatArray, f: float) -> FloatArray:
 
 def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
               n_bins: int = N_BINS, total: float | None = None,
-              null_whitening: bool = False) -> list[AxisFinding]:
+              null_whitening: bool = False, thrust: bool = False) -> list[AxisFinding]:
     """Axis findings for residual target ``y`` beyond the columns ``base`` (module doc).
 
     Shares are fractions of ``total`` (default: the energy of ``y``). ``null_whitening``
@@ -156,6 +156,8 @@ def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
     out = []
     bases = {"time": _bins(t, n_bins, False)[0], "position": _bins(x, n_bins, True)[0],
              "velocity": _bins(v, n_bins, True)[0]}
+    if thrust:  # open loop only: under feedback the thrust carries the sensor noise
+        bases["thrust"] = _bins(thinned(data, data.force), n_bins, True)[0]
     n_freq = len(r) // 2
     for axis, ind in bases.items():
         test = nested_f_test(y, base, ind, null_whitening=null_whitening)
@@ -164,19 +166,20 @@ def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
         details: dict[str, Any] = {}
         if axis == "time":
             details = _time_details(r, t, ind)
-        elif axis == "position":
+        elif axis in ("position", "thrust"):
+            vals = x if axis == "position" else thinned(data, data.force)
             details = {"bin_means_n": _bin_means(r, ind).tolist(),
-                       "position_range_m": [float(x.min()), float(x.max())]}
+                       f"{axis}_range": [float(vals.min()), float(vals.max())]}
         else:
             details = _velocity_details(r, v)
-        out.append(AxisFinding(axis, share, -test.corrected_log10_p(len(AXES)), details))
+        out.append(AxisFinding(axis, share, -test.corrected_log10_p(len(bases) + 1), details))
     u = data.project(data.force)
     f0, line_share, ratio, n_freq = strongest_line(r, t, data.sample_rate_hz, u)
     cols = _sincos(t - t[0], f0)
     _, r1 = lstsq(np.hstack([base, cols]), y)
     dof2 = 4 * NEIGHBOURS - 4
     logp = float(stats.f.logsf(ratio, 2, dof2)) / math.log(10.0) if f0 > 0 else 0.0
-    sig = max(0.0, -(logp + math.log10(len(AXES) - 1 + n_freq)))
+    sig = max(0.0, -(logp + math.log10(len(bases) + n_freq)))
     out.append(AxisFinding("frequency", float(r @ r - r1 @ r1) / yy, sig,
                            {"line_hz": f0, "line_power_share": line_share,
                             "line_to_local_level": ratio}))

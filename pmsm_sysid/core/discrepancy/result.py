@@ -143,7 +143,8 @@ def _fmt(value: Any, std: float | None) -> str:
 
 
 def _effect_line(e: FoundEffect) -> str:
-    keys = [k for k in e.params if not k.endswith("_means_n") and k != "window_rms_n"]
+    keys = [k for k in e.params
+            if not k.endswith("_means_n") and k not in ("window_rms_n", "curve")]
     params = ", ".join(f"{k}={_fmt(e.params[k], e.params_std.get(k))}" for k in keys)
     sig = f">{SIGNIFICANCE_CAP:.0f}" if e.significance >= SIGNIFICANCE_CAP \
         else f"{e.significance:.1f}"

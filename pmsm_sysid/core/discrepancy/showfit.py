@@ -26,10 +26,11 @@ from ..validation import correlation_tests
 from .estimate import Fit, contributions, design
 from .kinematics import EquationData
 from .locate import AxisFinding, scan_axes
+from .nonparam import AxisModel, fit_axis
 from .resim import Z_VERDICT, choose_horizon, compare
 from .result import FoundEffect
 from .select import Step
-from .stats import ar_whitener, nrmse, whiten
+from .stats import HeldOutTest, ar_whitener, held_out_test, lstsq, nrmse, whiten
 
 FloatArray = NDArray[np.float64]
 
@@ -55,25 +56,50 @@ def where_table(data: EquationData, ranking: list[Step]) -> list[AxisFinding]:
     return out
 
 
-def scan_unexplained(fit: Fit, data: EquationData, alpha: float,
-                     min_share: float) -> list[FoundEffect]:
-    """Axes on which the final residual is still significantly structured."""
+def scan_unexplained(fit: Fit, data: EquationData, alpha: float, min_share: float,
+                     est: tuple[Fit, EquationData], val: EquationData, thrust: bool,
+                     ) -> list[tuple[FoundEffect, AxisModel]]:
+    """Axes on which the final residual is still significantly structured, each with a
+    curve fitted on the estimation data (:mod:`.nonparam`) and judged on held-out data."""
     X, fixed = design(fit.effects, data)
     found = scan_axes(data, data.y - fixed, X, total=float(data.y @ data.y),
-                      null_whitening=True)
+                      null_whitening=True, thrust=thrust)
     out = []
     for f in found:
         if f.significance > -np.log10(alpha) and f.share >= min_share:
-            out.append(FoundEffect(
-                "unexplained", {"axis": f.axis, **f.details}, {}, f.significance, f.share,
-                None, "moderate",
-                (f"structure over {f.axis} that no library effect explains",)))
+            model, held = _curve(f.axis, est, val)
+            text = f"structure over {f.axis} that no library effect explains"
+            conf = "moderate" if held.significant else "low"
+            out.append((FoundEffect(
+                "unexplained", {"axis": f.axis, **model.describe(), **f.details}, {},
+                f.significance, f.share, held, conf, (text,)), model))
     return out
 
 
-def _segment_fit(fit: Fit, d: EquationData) -> dict[str, Any]:
+def _curve(axis: str, est: tuple[Fit, EquationData],
+           val: EquationData) -> tuple[AxisModel, HeldOutTest]:
+    """The best curve for ``axis`` on the estimation data, and its held-out test."""
+    fit, d = est
+    X, fixed = design(fit.effects, d)
+    kinds = {"position": ("position", "position_friction"), "frequency": ("time",)}
+    best: tuple[float, AxisModel] | None = None
+    for kind in kinds.get(axis, (axis,)):
+        m = fit_axis(d, d.y - fixed, X, kind)
+        sse = float(np.sum((d.y - fixed - X @ lstsq(X, d.y - fixed - m.force(d))[0]
+                            - m.force(d)) ** 2))
+        if best is None or sse < best[0]:
+            best = (sse, m)
+    assert best is not None
+    parts = contributions(fit, val)
+    e0 = val.y - (np.sum(parts, axis=0) if parts else 0.0)
+    return best[1], held_out_test(e0, e0 - best[1].force(val))
+
+
+def _segment_fit(fit: Fit, d: EquationData, extra: AxisModel | None) -> dict[str, Any]:
     parts = contributions(fit, d)
     after = d.y - (np.sum(parts, axis=0) if parts else 0.0)
+    if extra is not None:
+        after = after - extra.force(d)
     target = d.project(d.force)
     poly = ar_whitener(after)
     u = d.project(d.force)[len(poly) - 1:]
@@ -85,8 +111,9 @@ def _segment_fit(fit: Fit, d: EquationData) -> dict[str, Any]:
             "correlation_tests": tests, "samples": d.n}
 
 
-def fit_table(plant: Plant, corrected: Plant, fit: Fit, segs: Any,
-              do_replay: bool) -> tuple[dict[str, Any], dict[str, dict[str, FloatArray]]]:
+def fit_table(plant: Plant, corrected: Plant, fit: Fit, segs: Any, do_replay: bool,
+              extra: AxisModel | None = None,
+              ) -> tuple[dict[str, Any], dict[str, dict[str, FloatArray]]]:
     """The diagnose JSON's ``fit`` block (plus tests and output error) and replay series.
 
     The replay horizon is chosen once, on the estimation recording (:func:`.resim.
@@ -97,7 +124,7 @@ def fit_table(plant: Plant, corrected: Plant, fit: Fit, segs: Any,
     horizon = choose_horizon((plant, corrected), segs.recs["estimation"]) if do_replay \
         else None
     for name, d in (("estimation", segs.est), ("validation", segs.val)):
-        row = _segment_fit(fit, d)
+        row = _segment_fit(fit, d, extra)
         if horizon is not None:
             rec = segs.recs[name]
             cmp = compare(plant, corrected, rec, horizon)

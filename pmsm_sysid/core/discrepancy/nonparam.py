@@ -1,0 +1,152 @@
+"""A model for what no library effect explains: a smooth curve of the residual force.
+
+When the final model's residual is still structured on an axis, the force it leaves out is
+modelled without naming it, as a cubic B-spline of the axis variable (position, velocity or
+the thrust command), or over position times sign(v) (a friction that depends on where the
+mover is), or -- over time -- as one slow sinusoid at the residual's strongest line (a
+periodic disturbance; a spline over time would not carry over to other data). The curve's
+columns go through the same parallel filter as every regressor and are fitted with the
+library model's columns; it is then judged like an effect: on held-out data, with its
+estimation coefficients. Where it lives is read off the curve: the region around its
+largest excursion from its median level (position, velocity) or around its steepest rise
+(thrust: a dead zone or a saturation is a turn of the curve).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.interpolate import BSpline
+
+from .averaging import interval_friction
+from .kinematics import EquationData, thinned, thinned_times
+from .stats import ar_whitener, lstsq, whiten
+
+FloatArray = NDArray[np.float64]
+
+N_INTERVALS = 14
+DEGREE = 3
+UNITS = {"position": "m", "velocity": "m/s", "thrust": "N", "time": "s",
+         "position_friction": "m"}
+
+
+@dataclass(frozen=True)
+class AxisModel:
+    """A fitted curve over one axis: knots range, coefficients and their covariance."""
+
+    axis: str
+    lo: float
+    hi: float
+    coef: FloatArray
+    cov: FloatArray
+    freq_hz: float = 0.0
+
+    def raw(self, data: EquationData) -> FloatArray:
+        """Full-rate columns on ``data`` (values clipped to the fitted range)."""
+        if self.axis == "time":
+            tt = 2.0 * math.pi * self.freq_hz * data.t
+            return np.column_stack([np.sin(tt), np.cos(tt)])
+        vals = axis_values(data, self.axis)
+        basis = _basis(np.clip(vals, self.lo, self.hi), self.lo, self.hi)
+        if self.axis == "position_friction":
+            s = interval_friction(data.v_lo, data.v_hi, data.sign_smoothing_mps)
+            basis = basis * s[:, None]
+        return basis
+
+    def force(self, data: EquationData) -> FloatArray:
+        """The modelled force at the regression samples of ``data``."""
+        out: FloatArray = data.project(self.raw(data)) @ self.coef
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        """Where the curve lives: region, peak and a coarse table of the curve."""
+        if self.axis == "time":
+            amp = float(np.hypot(*self.coef))
+            return {"model": "sinusoid over time", "frequency_hz": self.freq_hz,
+                    "amplitude_n": amp, "region": [0.0, math.inf], "unit": "s"}
+        grid = np.linspace(self.lo, self.hi, 201)
+        g = _basis(grid, self.lo, self.hi) @ self.coef
+        rel = g - float(np.median(g))
+        score = np.abs(np.gradient(g, grid)) if self.axis == "thrust" else np.abs(rel)
+        k = int(np.argmax(score))
+        inside = score >= 0.5 * score[k]
+        a = b = k
+        while a > 0 and inside[a - 1]:
+            a -= 1
+        while b < len(grid) - 1 and inside[b + 1]:
+            b += 1
+        kind = "friction (force x sign of speed)" if self.axis == "position_friction" \
+            else "spline"
+        pick = np.linspace(0, len(grid) - 1, 15).astype(int)
+        return {"model": f"cubic B-spline over {self.axis.split('_')[0]}, {kind}",
+                "region": [float(grid[a]), float(grid[b])], "peak_at": float(grid[k]),
+                "peak_n": float(rel[k]), "width": float(grid[b] - grid[a]),
+                "unit": UNITS[self.axis],
+                "curve": {"at": grid[pick].tolist(), "force_n": g[pick].tolist()}}
+
+
+def axis_values(data: EquationData, axis: str) -> FloatArray:
+    """Full-rate values of an axis at the equation instants."""
+    if axis in ("position", "position_friction"):
+        return data.x
+    if axis == "velocity":
+        return data.v
+    if axis == "thrust":
+        return data.force
+    out: FloatArray = data.t
+    return out
+
+
+def _basis(vals: FloatArray, lo: float, hi: float) -> FloatArray:
+    inner = np.linspace(lo, hi, N_INTERVALS + 1)
+    knots = np.concatenate([[lo] * DEGREE, inner, [hi] * DEGREE])
+    v = np.clip(np.asarray(vals, dtype=np.float64), lo, hi)
+    out: FloatArray = BSpline.design_matrix(v, knots, DEGREE).toarray()
+    return out
+
+
+def _slow_line(r: FloatArray, t: FloatArray) -> float:
+    """Frequency of the strongest slow line (from one cycle over the data), least squares."""
+    span = float(t[-1] - t[0])
+    best = (0.0, 1.0 / span)
+    for f in np.linspace(0.5 / span, 10.0 / span, 77):
+        cols = np.column_stack([np.sin(2 * math.pi * f * t), np.cos(2 * math.pi * f * t)])
+        _, e = lstsq(cols, r)
+        best = max(best, (float(r @ r - e @ e), float(f)))
+    return best[1]
+
+
+def fit_axis(data: EquationData, y: FloatArray, base: FloatArray, axis: str) -> AxisModel:
+    """Fit the curve of ``axis`` to ``y`` together with the columns ``base``."""
+    return fit_axis_with(data, y, base, axis)[0]
+
+
+def fit_axis_with(data: EquationData, y: FloatArray, base: FloatArray,
+                  axis: str) -> tuple[AxisModel, FloatArray, float]:
+    """The curve, the coefficients of ``base`` fitted with it, and the residual energy."""
+    if axis == "time":
+        _, r = lstsq(base, y)
+        freq = _slow_line(r, thinned_times(data))
+        model = AxisModel(axis, 0.0, 0.0, np.zeros(2), np.eye(2), freq)
+    else:
+        vals = thinned(data, axis_values(data, axis))
+        lo, hi = float(np.quantile(vals, 0.005)), float(np.quantile(vals, 0.995))
+        if hi <= lo:
+            hi = lo + 1e-9
+        model = AxisModel(axis, lo, hi, np.zeros(N_INTERVALS + DEGREE),
+                          np.eye(N_INTERVALS + DEGREE))
+    cols = data.project(model.raw(data))
+    X = np.hstack([base, cols])
+    beta, r = lstsq(X, y)
+    poly = ar_whitener(r)
+    Xw = whiten(poly, X)
+    rw = whiten(poly, r)
+    s2 = float(rw @ rw) / max(1, len(rw) - X.shape[1])
+    cov = s2 * np.linalg.pinv(Xw.T @ Xw)
+    m = base.shape[1]
+    return (AxisModel(axis, model.lo, model.hi, beta[m:], cov[m:, m:], model.freq_hz),
+            beta[:m], float(r @ r))

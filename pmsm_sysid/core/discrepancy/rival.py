@@ -1,0 +1,98 @@
+"""Is a library name the best explanation? Its rival: a curve on the same axis.
+
+A force the library does not have (a bump at one place of the stroke, an actuator dead
+zone) is partly absorbed by library effects that share its axis (a cogging term and an
+offset; a mass and a viscous change). Each such group is put against a smooth curve on its
+axis (:mod:`.nonparam`) that replaces it, both fitted on the estimation data with the other
+effects; if the curve predicts the held-out data significantly better, the library group
+was not the best explanation: its confidence is capped and the curve is reported as
+``unexplained``, with where it lives.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .estimate import Fit, contributions, design
+from .kinematics import EquationData
+from .nonparam import AxisModel, fit_axis_with
+from .result import FoundEffect
+from .select import share_of
+from .stats import HeldOutTest, held_out_test, nested_f_test
+
+FloatArray = NDArray[np.float64]
+
+# the library effects whose force lives on each axis
+AXIS_EFFECTS = {
+    "position": ("cogging", "thrust_ripple", "spring", "force_offset"),
+    "position_friction": ("coulomb_friction", "stribeck_friction", "cogging", "force_offset"),
+    "velocity": ("coulomb_friction", "stribeck_friction", "viscous_error"),
+    "thrust": ("mass_error", "viscous_error", "thrust_lag", "transport_delay",
+               "coulomb_friction", "stribeck_friction", "force_offset"),
+    "time": ("force_offset",),
+}
+KINDS = {"position": ("position", "position_friction"), "velocity": ("velocity",),
+         "thrust": ("thrust",), "frequency": ("time",), "time": ("time",)}
+
+
+@dataclass(frozen=True)
+class Rival:
+    """A curve that beat the library effects ``replaced`` on held-out data."""
+
+    axis: str
+    model: AxisModel
+    held: HeldOutTest
+    replaced: tuple[str, ...]
+    significance: float
+    share: float
+
+
+def _fit(fit: Fit, keep: tuple[int, ...], est: EquationData, val: EquationData,
+         kind: str) -> tuple[AxisModel, float, FloatArray, float]:
+    """Curve ``kind`` with the effects ``keep``: model, est SSE, held-out error, -log10 p."""
+    rest = tuple(fit.effects[k] for k in keep)
+    X, fixed = design(rest, est)
+    model, beta, sse = fit_axis_with(est, est.y - fixed, X, kind)
+    Xv, fv = design(rest, val)
+    err = val.y - fv - (Xv @ beta if Xv.shape[1] else 0.0) - model.force(val)
+    cols = est.project(model.raw(est))
+    test = nested_f_test(est.y - fixed, X, cols, null_whitening=True)
+    return model, sse, err, -test.corrected_log10_p(3.0)
+
+
+def rivals(fit: Fit, est: EquationData, val: EquationData, thrust: bool,
+           alpha: float) -> list[Rival]:
+    """Curves that explain held-out data better than the library group on their axis."""
+    parts = contributions(fit, val)
+    e_lib = val.y - (np.sum(parts, axis=0) if parts else 0.0)
+    out = []
+    for axis in ("position", "velocity", "thrust"):
+        if axis == "thrust" and not thrust:
+            continue
+        group = [k for k, e in enumerate(fit.effects) if e.name in AXIS_EFFECTS[axis]]
+        if not group:
+            continue
+        keep = tuple(k for k in range(len(fit.effects)) if k not in group)
+        best = min((_fit(fit, keep, est, val, kind) for kind in KINDS[axis]),
+                   key=lambda t: t[1])
+        held = held_out_test(e_lib, best[2])
+        if held.significant and best[3] > -math.log10(alpha):
+            rest = tuple(fit.effects[k] for k in keep)
+            X, fixed = design(rest, est)
+            share = share_of(est.y - fixed, X, est.project(best[0].raw(est)))
+            out.append(Rival(axis, best[0], held,
+                             tuple(fit.effects[k].name for k in group), best[3], share))
+    return out
+
+
+def as_found(r: Rival) -> FoundEffect:
+    """The rival curve as an ``unexplained`` entry."""
+    return FoundEffect(
+        "unexplained", {"axis": r.axis, **r.model.describe()}, {}, r.significance, r.share,
+        r.held, "moderate",
+        (f"a curve over {r.axis} predicts held-out data better than "
+         f"{', '.join(r.replaced)} (held-out MSE -{r.held.reduction:.0%}, z={r.held.z:.1f})",))
