@@ -95,3 +95,16 @@ def test_ros_args_errors_are_one_line_and_exit_2(ros_env: int, tmp_path: Path) -
         proc = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=120)
         lines = proc.stderr.strip().splitlines()
         assert proc.returncode == 2 and len(lines) == 1 and match in lines[0], proc.stderr
+
+
+def test_the_readme_lists_every_topic_with_its_type() -> None:
+    """The topic table of the README is in step with the code's topic names and types."""
+    from pmsm_sysid.topics import INPUT_TYPES, OUTPUT_TYPES, STAT_TOPICS
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    rows = {f"`<ns>/{n}` | `{t}`" for n, t in {**INPUT_TYPES, **OUTPUT_TYPES}.items()}
+    rows |= {f"`<ns>/stats/<output>/{q}` | `{t}` | {u} |" for q, (t, u, _) in
+             STAT_TOPICS.items()}
+    rows.add("`/diagnostics` | `diagnostic_msgs/msg/DiagnosticArray`")
+    missing = [r for r in rows if r not in readme]
+    assert not missing, missing
