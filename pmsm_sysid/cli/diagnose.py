@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(found.corrected.to_yaml())
     if args.report:
-        from ..plots.diagnose import write_report
+        from ..report.diagnose import write_report
 
         index = write_report(found.result, args.report, title=f"{args.plant} vs {args.real}")
         print(f"report: {index}", file=out)

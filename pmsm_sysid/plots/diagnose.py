@@ -13,12 +13,11 @@ function                 shows
 =======================  ====================================================================
 
 Each returns a :class:`~.base.Plot` whose ``data`` holds what was drawn, read back from the
-artists. ``write_report`` saves them and writes ``index.html`` with the report tables.
+artists. :func:`pmsm_sysid.report.diagnose.write_report` saves them with the report tables.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -191,30 +190,3 @@ def figures(result: DiagnoseResult) -> list[Plot]:
         out.append(speed_replay(result))
     return out
 
-
-def write_report(result: DiagnoseResult, out_dir: str | Path, title: str = "") -> Path:
-    """Save the figures as PNG in ``out_dir`` and write the one-file page ``index.html``."""
-    from ..progress import Bar
-    from ..report import diagnose as sections
-    from ..report.html import Image, Section, image, write_page
-    from .base import save
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    images = []
-    doc = result.to_dict()
-    with Bar(4 + bool(result.curves.replay) + len(doc["effects"]), "report") as bar:
-        for plot in figures(result):
-            images.append(image(save(plot, out), plot.caption))
-            plot.figure.clear()
-            bar.update()
-
-        def draw(p: Plot) -> Image:
-            bar.update()
-            return image(save(p, out), p.caption)
-
-        pages = sections.json_sections(doc)
-        pages.insert(2, Section("Sim-to-real: figures", tuple(images)))
-        pages[3:3] = sections.effect_sections(doc, result, draw)
-    return write_page(out, f"pmsm-sysid diagnose: {title}" if title else "pmsm-sysid diagnose",
-                      pages)

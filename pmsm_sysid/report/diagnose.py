@@ -211,3 +211,31 @@ def effect_sections(d: Mapping[str, Any], result: Any,
                 blocks.append(Note(f"before/after figure not drawn: {exc}"))
         out.append(Section(f"Effect: {e['name']}", tuple(blocks)))
     return out
+
+
+def write_report(result: Any, out_dir: str | Path, title: str = "") -> Path:
+    """Save the figures as PNG in ``out_dir`` and write the one-file page ``index.html``."""
+    from ..plots.base import save
+    from ..plots.diagnose import figures
+    from ..progress import Bar
+    from .html import image, write_page
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    images = []
+    doc = result.to_dict()
+    with Bar(4 + bool(result.curves.replay) + len(doc["effects"]), "report") as bar:
+        for plot in figures(result):
+            images.append(image(save(plot, out), plot.caption))
+            plot.figure.clear()
+            bar.update()
+
+        def draw(p: Any) -> Image:
+            bar.update()
+            return image(save(p, out), p.caption)
+
+        pages = json_sections(doc)
+        pages.insert(2, Section("Sim-to-real: figures", tuple(images)))
+        pages[3:3] = effect_sections(doc, result, draw)
+    return write_page(out, f"pmsm-sysid diagnose: {title}" if title else "pmsm-sysid diagnose",
+                      pages)
