@@ -437,6 +437,8 @@ def record_summary(pipe: Pipeline) -> dict[str, Any]:
         lost = max((pipe.sim.published - topics.get(t, 0) for t in inputs), default=0)
     elif pipe.identifier is not None:  # received here but not recorded, or skipped stamps
         got = pipe.identifier.engine.stats.samples_received
+        never = set(pipe.identifier.input_report().missing)  # e.g. no speed: derived
+        inputs = [t for t in inputs if t not in never]
         lost = max((max(got - topics.get(t, 0), missing.get(t, 0)) for t in inputs), default=0)
     else:
         lost = max((missing.get(t, 0) for t in inputs), default=0)

@@ -39,16 +39,18 @@ def _slice(full: Path, out: Path) -> None:
     write_recording(out, rec.window(START, STOP))  # speed derived: no speed topic written
 
 
-def _replay_into_pipeline(bag: Path, env: dict[str, str], ctx: Any) -> tuple[Any, ...]:
+def _replay_into_pipeline(bag: Path, env: dict[str, str], ctx: Any,
+                          record: Path) -> tuple[Any, ...]:
     from pmsm_sysid.app import build_pipeline
 
     n = STOP - START
-    with build_pipeline(["identifier", "gfrf"], context=ctx,
+    with build_pipeline(["identifier", "gfrf"], context=ctx, record=str(record),
                         identifier_params={"queue_size": 64},
                         gfrf_params={"orders": [1], "queue_size": 64}) as pipe:
         replay = subprocess.Popen(
-            [sys.executable, "-m", "pmsm_sysid.cli", "replay", str(bag), "--wait", "30",
-             "--json", "-"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            [sys.executable, "-m", "pmsm_sysid.cli", "replay", str(bag), "--wait", "60",
+             "--subscribers", "2", "--json", "-"],
+            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
             deadline = time.monotonic() + 180
             pipe.run(until=lambda: replay.poll() is not None or time.monotonic() > deadline)
@@ -73,22 +75,30 @@ def test_emps_walkthrough_live_equals_offline(ros_context: Any, ros_env: int,
     _slice(full, part)
     env = {**os.environ, "ROS_DOMAIN_ID": str(ros_env), "ROS_LOG_DIR": str(tmp_path / "log"),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    s, models, replayed, _ = _replay_into_pipeline(part, env, ros_context)
+    live = tmp_path / "live"
+    s, models, replayed, _ = _replay_into_pipeline(part, env, ros_context, live)
 
     # the replay says what it published and that the identifier listened
     assert replayed["topics"]["/pmsm/position"] == STOP - START
-    assert replayed["subscribers"]["/pmsm/position"] >= 1
-    assert replayed["subscribers"]["/pmsm/thrust"] >= 1
+    assert replayed["subscribers"]["/pmsm/position"] == 2  # the identifier and the recorder
+    assert replayed["subscribers"]["/pmsm/thrust"] == 2
     # the run says what came and what did not, and that speed is derived
     assert s["samples_received"] == STOP - START and s["samples_dropped"] == 0
     assert s["samples_missing"] == 0 and s["windows_skipped"] == 0
     assert s["speed_derived"] is True
+    assert s["record_samples_lost"] == 0  # no speed topic is no loss: it never existed
     ins = s["inputs"]
     assert ins["missing"] == ["/pmsm/speed"] and ins["problem"] is None
     assert ins["arrived"]["/pmsm/position"]["rate_hz"] == pytest.approx(1000.0, rel=1e-4)
 
     rec = read_recording(part).recording
     assert rec.speed_derived
+    # the recording of the run holds the inputs as replayed and every model published
+    assert len(read_recording(live).recording) == STOP - START
+    sys.path.insert(0, str(REPO / "scripts"))
+    from live_vs_offline import live_models
+
+    assert len(live_models(str(live))) == len(models)
     outputs = {m["output"] for m in models}
     assert outputs == {"speed", "position"}
     n_windows = len({m["window"]["stop_index"] for m in models})
