@@ -108,3 +108,28 @@ def test_the_readme_lists_every_topic_with_its_type() -> None:
     rows.add("`/diagnostics` | `diagnostic_msgs/msg/DiagnosticArray`")
     missing = [r for r in rows if r not in readme]
     assert not missing, missing
+
+
+@pytest.mark.ros
+def test_remaps_and_params_reach_every_node_of_the_pipeline(ros_env: int, tmp_path: Path) -> None:
+    """``-r __ns:=`` moves the whole pipeline, a relative ``-r`` renames one topic, and a
+    params file's ``/**`` section reaches every node that has the parameter."""
+    from pmsm_sysid.app import build_pipeline
+
+    params = tmp_path / "p.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    publish_period_s: 0.2\n")
+    args = ["--ros-args", "-r", "__ns:=/moved", "-r", "model:=model_raw",
+            "--params-file", str(params)]
+    with build_pipeline(["sim", "identifier", "gfrf"], clock="sim", domain_id=ros_env,
+                        ros_args=args, identifier_params={"outputs": ["speed"]}) as pipe:
+        ident, gfrf = pipe.identifier, pipe.gfrf
+        assert ident.get_fully_qualified_name() == "/moved/pmsm_identifier"
+        assert gfrf.get_fully_qualified_name() == "/moved/pmsm_gfrf"
+        assert {p.topic_name for p in pipe.sim.input_publishers} == {
+            "/moved/thrust", "/moved/speed", "/moved/position"}
+        assert ident.resolve_topic_name("model") == "/moved/model_raw"
+        for node in (ident, gfrf):
+            assert node.get_parameter("publish_period_s").value == 0.2
+        pipe.run(3.0)
+        pipe.finish()
+        assert ident.models_published >= 2 and gfrf.received == ident.models_published
