@@ -219,7 +219,8 @@ def _close(process: Any) -> None:
 
 # --- the sim motor and the GFRF node -------------------------------------------------------
 
-_UNITS = (("_n_per_mps", "N/(m/s)"), ("_n_per_m", "N/m"), ("_mps", "m/s"), ("_kg", "kg"),
+_UNITS = (("speed_std", "m/s"), ("position_std", "m"), ("force_std", "N"), ("thrust_std", "N"),
+          ("_n_per_mps", "N/(m/s)"), ("_n_per_m", "N/m"), ("_mps", "m/s"), ("_kg", "kg"),
           ("_ohm", "ohm"), ("_wb", "Wb"), ("_hz", "Hz"), ("_rad", "rad"), ("_n", "N"),
           ("_m", "m"), ("_s", "s"), ("_h", "H"))
 SIM_TEXT = {
@@ -233,18 +234,25 @@ SIM_TEXT = {
     "max_samples": "stop after this many samples (0 = never)",
     "frame_id": "header.frame_id of the published messages",
     "sample_rate_hz": "sample rate of the simulated drive in Hz",
-    "substeps": "integration substeps per sample",
+    "substeps": "plant: integration substeps per sample",
+    "mass_kg": "plant: moving mass in kg",
+    "viscous_n_per_mps": "plant: viscous friction coefficient in N/(m/s)",
+    "rs_ohm": "plant: stator phase resistance Rs in ohm",
+    "ls_h": "plant: stator phase inductance Ls in H",
+    "flux_wb": "plant: permanent-magnet flux linkage in Wb",
     "relative": "relative amplitude (fraction of the thrust)",
     "harmonics": "cogging harmonics as a YAML/JSON list of {order, amplitude_n, phase_rad}",
 }
 SIM_FIXED = ("sample_rate_hz", "seed", "clock", "frame_id")
 
 
-def _unit(name: str) -> str:
+def _words(name: str) -> str:
+    """``pitch_m`` -> "pitch in m", ``speed_std`` -> "speed std in m/s"."""
     for suffix, unit in _UNITS:
         if name.endswith(suffix):
-            return f" in {unit}"
-    return ""
+            stem = name if suffix.endswith("_std") else name[: -len(suffix)]
+            return f"{stem.replace('_', ' ')} in {unit}"
+    return name.replace("_", " ")
 
 
 def sim_specs(names: Sequence[str]) -> dict[str, Spec]:
@@ -253,13 +261,13 @@ def sim_specs(names: Sequence[str]) -> dict[str, Spec]:
     for name in names:
         block, _, key = name.rpartition(".")
         if not block:
-            text = SIM_TEXT.get(name, f"plant: {name.replace('_', ' ')}{_unit(name)}")
+            text = SIM_TEXT.get(name) or f"plant: {_words(name)} (validated as in a plant file)"
         elif key == "enabled":
             text = f"plant: switch the {block.replace('_', ' ')} effect on (set its values first)"
         else:
-            text = (f"plant: {block.replace('_', ' ')} "
-                    f"{SIM_TEXT.get(key, key.replace('_', ' ') + _unit(key))}")
-        out[name] = Spec(text + "; validated as in a plant file", read_only=name in SIM_FIXED)
+            what = SIM_TEXT[key] if key in ("harmonics", "relative") else _words(key)
+            text = f"plant: {block.replace('_', ' ')} {what} (validated as in a plant file)"
+        out[name] = Spec(text, read_only=name in SIM_FIXED)
     return out
 
 
