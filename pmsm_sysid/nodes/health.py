@@ -188,3 +188,25 @@ def replay_health(node: Any) -> Callable[[], Report]:
                                 "passes": node.stats.passes, "finished": node.finished}
 
     return report
+
+
+def monitor_health(node: Any) -> Callable[[], Report]:
+    """What the monitor sees of its pipeline: per input topic the rate, gaps and age."""
+
+    def report() -> Report:
+        snap = node.snapshot()
+        inputs = [t for t in snap["topics"] if t["topic"].rsplit("/", 1)[-1] in
+                  ("thrust", "speed", "position")]
+        silent = [t["topic"] for t in inputs if t["count"] and (t["age_s"] or 0.0) > 1.0]
+        gaps = sum(t["gaps"] for t in inputs)
+        values: dict[str, Any] = {}
+        for t in inputs:
+            values[f"{t['topic']}.rate_hz"] = t["rate_hz"]
+            values[f"{t['topic']}.gaps"] = t["gaps"]
+        if silent:
+            return WARN, f"no message for over 1 s on {', '.join(silent)}", values
+        if not any(t["count"] for t in inputs):
+            return WARN, "no input seen yet", values
+        return OK, f"ok: inputs arriving, {gaps} gap(s) so far", values
+
+    return report

@@ -30,6 +30,7 @@ from ..topics import (
     VALIDATION,
     normalize_namespace,
 )
+from .health import HealthPublisher, monitor_health
 
 
 def diagnostic_dicts(msg: Any) -> list[dict[str, Any]]:
@@ -81,6 +82,7 @@ class MonitorNode(Node):
             topic = self.resolve_topic_name(name)
             self.stats[topic] = TopicStats(topic, type_name)
             self.create_subscription(cls, name, self._output_callback(topic, handler), 10)
+        self.health = HealthPublisher(self, "monitor", monitor_health(self))
 
     def _input_callback(self, topic: str, signal: str) -> Callable[[Any], None]:
         stats = self.stats[topic]
