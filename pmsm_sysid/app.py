@@ -70,6 +70,7 @@ class Pipeline:
     stop: threading.Event = field(default_factory=threading.Event)
     recorder: Any = None
     record_result: dict[str, Any] | None = None
+    record_error: str | None = None
     gfrf_every_model: bool = False
     started: float = field(default_factory=time.monotonic)
 
@@ -189,7 +190,10 @@ class Pipeline:
             for pub in node.publishers:
                 if pub.topic_name in self.recorder.topics:
                     pub.wait_for_all_acked(Duration(seconds=min(timeout_s, 5.0)))
-        self.record_result = self.recorder.stop(timeout_s)
+        try:
+            self.record_result = self.recorder.stop(timeout_s)
+        except PmsmSysidError as exc:  # reported in the summary, not hidden
+            self.record_error = str(exc)
 
     def _spin_while(self, busy: Callable[[], bool], timeout_s: float) -> None:
         t_end = time.monotonic() + timeout_s
@@ -442,7 +446,7 @@ def record_summary(pipe: Pipeline) -> dict[str, Any]:
         lost = max((max(got - topics.get(t, 0), missing.get(t, 0)) for t in inputs), default=0)
     else:
         lost = max((missing.get(t, 0) for t in inputs), default=0)
-    return {"record": str(pipe.recorder.path),
+    return {"record": str(pipe.recorder.path), "record_error": pipe.record_error,
             "recorded_messages": res.get("messages") if res else None,
             "recorded_by_topic": topics, "record_samples_lost": lost if res else None,
             "record_stamp_gaps": sum(res.get("stamp_gaps", {}).values()) if res else None}

@@ -136,7 +136,7 @@ def _headline(s: dict[str, Any]) -> str:
         parts.append(f"recorded {s['recorded_messages']} messages, "
                      + (f"RECORDING LOST {lost} samples" if lost else "no sample lost"))
     elif s.get("record"):
-        parts.append("RECORDING NOT FINALISED (counts unknown)")
+        parts.append(f"RECORDING NOT FINALISED ({s.get('record_error') or 'counts unknown'})")
     return "; ".join(parts)
 
 
