@@ -182,13 +182,18 @@ class Pipeline:
             self.finish_recording(timeout_s)
 
     def finish_recording(self, timeout_s: float = 30.0) -> None:
-        """Wait until the recorder acknowledged every message published here, then let it
-        take them all, finalise the bag and report its counts (``record_result``)."""
+        """Wait until the recorder holds every sample published (or received) here and has
+        acknowledged every message published here (each bounded by ``timeout_s``), then let
+        it take them all, finalise the bag and report its counts (``record_result``)."""
         from rclpy.duration import Duration
 
+        rec = self.recorder
+        want = (self.sim.published if self.sim is not None else
+                self.identifier.engine.samples_received if self.identifier is not None else 0)
+        self._spin_while(lambda: rec.alive and rec.samples_recorded < want, timeout_s)
         for node in self.nodes.values():
             for pub in node.publishers:
-                if pub.topic_name in self.recorder.topics:
+                if pub.topic_name in rec.topics:
                     pub.wait_for_all_acked(Duration(seconds=min(timeout_s, 5.0)))
         try:
             self.record_result = self.recorder.stop(timeout_s)

@@ -28,7 +28,9 @@ list), and ``excitation``, ``amplitude_n``, ``seed``, ``clock``, ``rate``,
 invalid values are rejected with the reason) and calls ``sim.set_plant`` keeping the state.
 ``sample_rate_hz``, ``seed``, ``clock`` and ``frame_id`` are fixed once running.
 
-Data QoS: reliable, keep-last 1000 (:func:`pmsm_sysid.rosutil.data_qos`).
+Data QoS: reliable; publishers keep the last 10000 samples for a reader that has not
+acknowledged them (``PUBLISH_DEPTH``, 20 s at 500 Hz), subscribers the last 1000
+(:func:`pmsm_sysid.rosutil.data_qos`).
 """
 
 from __future__ import annotations
@@ -157,6 +159,10 @@ class SampleStepper:
 
 # --- the node -----------------------------------------------------------------------------
 
+#: samples a publisher keeps for a reader that has not acknowledged them (20 s at 500 Hz):
+#: a reliable reader starved of CPU for a while (a recorder on a loaded machine) loses none
+PUBLISH_DEPTH = 10000
+
 class MotorSimNode(Node):
     """Publishes the simulated motor's three topics at the plant's sample rate."""
 
@@ -200,7 +206,8 @@ class MotorSimNode(Node):
         self.published = 0
         self.finished = False
         self._msgs = make_sample_messages(0, 0.0, 0.0, 0.0, v["frame_id"])
-        self._pubs = {sig: self.create_publisher(type(self._msgs[sig]), sig, data_qos())
+        self._pubs = {sig: self.create_publisher(type(self._msgs[sig]), sig,
+                                                 data_qos(PUBLISH_DEPTH))
                       for sig in INPUT_TYPES}
         self._clock_pub = (self.create_publisher(Clock, "/clock", 10)
                            if v["clock"] == "sim" else None)
