@@ -3,7 +3,8 @@
 A force the library does not have (a bump at one place of the stroke, an actuator dead
 zone) is partly absorbed by library effects that share its axis (a cogging term and an
 offset; a mass and a viscous change). Each such group is put against a smooth curve on its
-axis (:mod:`.nonparam`) that replaces it, both fitted on the estimation data with the other
+axis (:mod:`.nonparam`; friction terms against a friction curve over position) that
+replaces it, both fitted on the estimation data with the other
 effects; if the curve predicts the held-out data significantly better, the library group
 was not the best explanation: its confidence is capped and the curve is reported as
 ``unexplained``, with where it lives.
@@ -29,14 +30,12 @@ FloatArray = NDArray[np.float64]
 # the library effects whose force lives on each axis
 AXIS_EFFECTS = {
     "position": ("cogging", "thrust_ripple", "spring", "force_offset"),
-    "position_friction": ("coulomb_friction", "stribeck_friction", "cogging", "force_offset"),
+    "position_friction": ("coulomb_friction", "stribeck_friction"),
     "velocity": ("coulomb_friction", "stribeck_friction", "viscous_error"),
     "thrust": ("mass_error", "viscous_error", "thrust_lag", "transport_delay",
                "coulomb_friction", "stribeck_friction", "force_offset"),
     "time": ("force_offset",),
 }
-KINDS = {"position": ("position", "position_friction"), "velocity": ("velocity",),
-         "thrust": ("thrust",), "frequency": ("time",), "time": ("time",)}
 
 
 @dataclass(frozen=True)
@@ -61,7 +60,7 @@ def _fit(fit: Fit, keep: tuple[int, ...], est: EquationData, val: EquationData,
     err = val.y - fv - (Xv @ beta if Xv.shape[1] else 0.0) - model.force(val)
     cols = est.project(model.raw(est))
     test = nested_f_test(est.y - fixed, X, cols, null_whitening=True)
-    return model, sse, err, -test.corrected_log10_p(3.0)
+    return model, sse, err, -test.corrected_log10_p(4.0)
 
 
 def rivals(fit: Fit, est: EquationData, val: EquationData, thrust: bool,
@@ -70,23 +69,27 @@ def rivals(fit: Fit, est: EquationData, val: EquationData, thrust: bool,
     parts = contributions(fit, val)
     e_lib = val.y - (np.sum(parts, axis=0) if parts else 0.0)
     out = []
-    for axis in ("position", "velocity", "thrust"):
-        if axis == "thrust" and not thrust:
+    for kind in ("position", "position_friction", "velocity", "thrust"):
+        if kind == "thrust" and not thrust:
             continue
-        group = [k for k, e in enumerate(fit.effects) if e.name in AXIS_EFFECTS[axis]]
+        group = [k for k, e in enumerate(fit.effects) if e.name in AXIS_EFFECTS[kind]]
         if not group:
             continue
         keep = tuple(k for k in range(len(fit.effects)) if k not in group)
-        best = min((_fit(fit, keep, est, val, kind) for kind in KINDS[axis]),
-                   key=lambda t: t[1])
+        best = _fit(fit, keep, est, val, kind)
         held = held_out_test(e_lib, best[2])
+        axis = kind.split("_")[0]
         if held.significant and best[3] > -math.log10(alpha):
             rest = tuple(fit.effects[k] for k in keep)
             X, fixed = design(rest, est)
             share = share_of(est.y - fixed, X, est.project(best[0].raw(est)))
             out.append(Rival(axis, best[0], held,
                              tuple(fit.effects[k].name for k in group), best[3], share))
-    return out
+    best_of: dict[str, Rival] = {}
+    for r in out:  # one curve per axis: the one that predicts the held-out data best
+        if r.axis not in best_of or r.held.reduction > best_of[r.axis].held.reduction:
+            best_of[r.axis] = r
+    return list(best_of.values())
 
 
 def as_found(r: Rival) -> FoundEffect:
