@@ -73,3 +73,13 @@ def test_shaded_regions_are_where_the_input_has_power() -> None:
     shaded = [pt for pt in plot.figure.axes[0].patches]
     assert len(shaded) == len(spans)
     assert "where the estimation input has power" in plot.caption
+
+
+def test_package_text_has_no_shorthand() -> None:
+    """Docstrings, help, messages and notes in the package (what the API reference and the
+    errors show) speak plainly too."""
+    hits = [f"{p.relative_to(REPO)}:{i}: {line.strip()}"
+            for p in sorted((REPO / "pmsm_sysid").rglob("*.py"))
+            for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
+            if SHORTHAND.search(line)]
+    assert not hits, hits[:5]

@@ -51,7 +51,7 @@ def _sd(var: float) -> float:
 
 
 def effect_params(fit: Fit, k: int, plant: Plant) -> tuple[dict[str, Any], dict[str, float]]:
-    """The contract's params for effect k of ``fit`` and their standard errors."""
+    """The reported params of effect k of ``fit`` and their standard errors."""
     e = fit.effects[k]
     b = fit.beta[fit.slices()[k]]
     cov = fit.beta_cov(k)
