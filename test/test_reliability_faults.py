@@ -361,7 +361,8 @@ def test_identifier_node_survives_failing_fits_a_silent_and_a_restarted_publishe
         while time.monotonic() - quiet_from < 0.6 or not ident.stale:
             assert time.monotonic() - quiet_from < 30, "the identifier never reported stale input"
             ex.spin_once(timeout_sec=0.05)
-        ages = [t["age_s"] for t in mon.snapshot()["topics"] if t["topic"].startswith(ns)
+        inputs = {f"{ns}/{sig}" for sig in SIGNALS}  # the results live under ns too
+        ages = [t["age_s"] for t in mon.snapshot()["topics"] if t["topic"] in inputs
                 and t["count"]]
         assert len(ages) == 3 and min(ages) >= 0.5
         # ... and the identifier reports its stale input itself (once), on the validation topic
