@@ -19,6 +19,8 @@ from rich.console import Group, RenderableType
 from rich.table import Table
 from rich.text import Text
 
+from ..core.history import CHANGE_NAMES
+
 UNITS = {"thrust": "N", "speed": "m/s", "position": "m"}
 TOP_TERMS = 4
 EVENTS = 3
@@ -30,9 +32,6 @@ CORR_HINT = {
     "u2e2": "nonlinearity missing: try more terms",
     "e_eu": "nonlinear terms missing: try more terms",
 }
-CHANGE_NAMES = {"xval_nrmse": "next-window NRMSE", "fit_nrmse": "fit NRMSE",
-                "harmonics_db": "harmonics", "h1_gain_db": "H1 gain",
-                "h1_phase_rad": "H1 phase", "term_jaccard": "terms"}
 
 
 def num(value: Any, unit: str = "") -> str:

@@ -21,6 +21,10 @@ from typing import Any
 
 MAX_ROWS = 2048
 MAX_EVENTS = 200
+#: what each change-detector feature is, in words
+CHANGE_NAMES = {"xval_nrmse": "next-window NRMSE", "fit_nrmse": "fit NRMSE",
+                "harmonics_db": "harmonics", "h1_gain_db": "H1 gain",
+                "h1_phase_rad": "H1 phase", "term_jaccard": "terms"}
 
 
 def _float(value: Any) -> float | None:

@@ -165,7 +165,7 @@ def latency_over_time(hist: Mapping[str, Any]) -> Plot:
         if skipped[output] and known:
             seq, t = np.asarray(known).T
             ts = np.interp(skipped[output], seq, t) - t0  # between its neighbours in time
-            ax.plot(ts, np.zeros(len(ts)), "x", color="tab:red", label=f"{output}: skipped")
+            ax.plot(ts, np.zeros(len(ts)), "x", color="tab:red", label=f"{output}: no model")
     ax.set_ylabel("fit time (ms)")
     ax.set_xlabel(XLABEL)
     ax.legend(loc="upper left")

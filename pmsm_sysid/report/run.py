@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from ..core.history import CHANGE_NAMES
 from .html import Block, Facts, Note, Section, Table
 from .sink import Sink
 
@@ -33,8 +34,9 @@ def facts(d: Mapping[str, Any]) -> Facts:
 def events_table(hist: Mapping[str, Any]) -> Table:
     t0 = min((r["t"] for rows in hist["outputs"].values() for r in rows
               if r.get("t") is not None), default=0.0)
-    rows = tuple((str(e.get("output")), _n(None if e.get("t") is None else e["t"] - t0,
-                                           "{:.1f}"), ", ".join(e.get("reasons") or []))
+    rows = tuple((str(e.get("output")),
+                  _n(None if e.get("t") is None else e["t"] - t0, "{:.1f}"),
+                  ", ".join(CHANGE_NAMES.get(r, r) for r in e.get("reasons") or []))
                  for e in hist.get("events") or [])
     return Table("Change events (time since the first window, s)",
                  ("output", "time (s)", "what moved"), rows)
