@@ -133,7 +133,9 @@ def _busy_view() -> tuple[SysIdView, list[TopicStats]]:
                                  "min_r2": "0.9", "diverged": "false",
                                  "corr.ee": _corr(False, 0.9421243257642296),
                                  "corr.ue": _corr(True, 0.011854537755205102),
-                                 "corr.u2e2": _corr(False, 0.14532937487395034)}},
+                                 "corr.u2e2": _corr(False, 0.14532937487395034),
+                                 "change_score": "2.3456789012345", "change_state": "steady",
+                                 "change_threshold": "7.0"}},
                      {"name": "gfrf/validation/position", "level": 0, "message": "ok",
                       "values": {"r2": "0.99912345678901234", "corr.ee.max_abs": "0.01",
                                  "corr.ee.band": "0.06", "corr.ee.pass": "true"}},
@@ -174,6 +176,7 @@ def test_view_fits_80_columns_plainly() -> None:
     assert "free-run R² 0.412 < 0.900" in by_test["identifier position"]
     assert "2023 Hz" in text  # a rate of thousands without an exponent
     assert "00:" in text and "next-window NRMSE z=56" in text  # event time and reason
+    assert "change score speed 2.35 (threshold 7)" in text
     wide = render(_snap(v, topics), 12.3, width=120)
     assert max(len(line) for line in wide.splitlines()) <= 120
 

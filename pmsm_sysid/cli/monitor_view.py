@@ -198,11 +198,27 @@ def _change_row(c: Mapping[str, Any]) -> tuple[str, str, str]:
     return clock(c.get("stamp_s")), output, what or str(c.get("message", ""))
 
 
+def change_scores(view: Mapping[str, Any]) -> str:
+    """The change detector's latest score per output against its threshold."""
+    parts, threshold = [], None
+    for s in view.get("validation") or []:
+        v = s.get("values") or {}
+        if "change_score" in v:
+            parts.append(f"{str(s.get('name', '')).rsplit('/', 1)[-1]} {num(v['change_score'])}")
+            threshold = v.get("change_threshold", threshold)
+    if not parts:
+        return ""
+    return "change score " + ", ".join(parts) + (f" (threshold {num(threshold)})"
+                                                 if threshold is not None else "")
+
+
 def changes_block(view: Mapping[str, Any]) -> RenderableType:
     changes = view.get("changes") or []
+    scores = change_scores(view)
     if not changes:
-        return Text("change events: none")
-    t = _table(f"change events (latest {min(len(changes), EVENTS)} of {len(changes)})")
+        return Text("change events: none" + (f"; {scores}" if scores else ""))
+    t = _table(f"change events (latest {min(len(changes), EVENTS)} of {len(changes)})"
+               + (f"; {scores}" if scores else ""))
     t.add_column("time", no_wrap=True)
     t.add_column("output", no_wrap=True)
     t.add_column("what changed (z = standardised change)")

@@ -117,7 +117,8 @@ def predicted_vs_measured(k: ArrayLike, y: ArrayLike, yhat: ArrayLike,
     ax.legend(loc="upper right")
     ax.set_title(f"{window} window: model predicted output, {state}")
     ax_e.plot(kk, ym - yp, color="0.3")
-    ax_e.set_ylabel("error")
+    unit = UNITS.get(output_name)
+    ax_e.set_ylabel(f"error ({unit})" if unit else "error")
     ax_e.set_xlabel("sample k")
     fig_no = "Figs. 4, 9" if window == "estimation" else "Figs. 5, 10"
     caption = (f"Model predicted output (Eq. 12: the model fed its own past outputs) against "
