@@ -97,3 +97,15 @@ def test_one_ms_actuator_lag_with_random_binary_inputs(kind: str) -> None:
     assert set(named) == {"thrust_lag"}, list(named)
     assert named["thrust_lag"].params["tau_s"] == pytest.approx(0.001, rel=0.3)
     assert not result.method["feedback"]["closed_loop"]
+
+
+def test_thrust_sensor_noise_is_not_feedback() -> None:
+    """Open loop with 5 N of thrust-sensor noise (the paper bags' noise): not a loop."""
+    from pmsm_sysid.core.discrepancy.kinematics import FEEDBACK_Z, feedback_z
+
+    noise = Noise(speed_std=0.002, position_std=5e-6, force_std=1.0, thrust_std=5.0)
+    for seed in (1, 2, 3):
+        rec = simulate(nominal_plant().with_effects(noise=noise),
+                       make_excitation("paper-speed", 4500, FS, seed=seed), seed=seed)
+        assert feedback_z(rec) < FEEDBACK_Z, seed
+    assert feedback_z(_closed(5, HIGH)) > 3 * FEEDBACK_Z

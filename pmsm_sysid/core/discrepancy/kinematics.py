@@ -114,12 +114,18 @@ def feedback_z(rec: Recording) -> float:
 
     Under feedback the thrust at t_k answers the measurement taken at t_k, noise included
     (a D-term to the speed noise, a P-term to the position noise); open loop it is set
-    without looking at it. So the new part of the thrust (what its own past and the
-    measurements' past do not predict) is correlated with the new part of a measurement
-    (its innovation: sensor noise and process force) only under feedback -- the motion's
-    answer to the thrust comes a sample later and is in the past of both. The largest
-    |correlation|·sqrt(N) over the speed (if measured) and the position is returned; above
-    ``FEEDBACK_Z`` the recording is treated as closed loop.
+    without looking at it. Two views of that must agree (the smaller z is returned):
+
+    * the new part of the thrust (what its own past and the measurements' past, 8 samples,
+      do not predict) against the new part of the speed or position (sensor noise, process
+      force): open loop the motion answers the thrust a sample later, in the past of both,
+      so a held random input (PRBS, APRBS) is not taken for a loop -- but a noisy thrust
+      sensor in that past makes both predictions err together;
+    * the thrust against the speed or position above 0.3 fs, where a servo's motion has no
+      power: immune to thrust-sensor noise, but the speed's physical answer to the edges of
+      a held random input shows there too.
+
+    Above ``FEEDBACK_Z`` the recording is treated as closed loop.
     """
     p = FEEDBACK_LAGS
     f = np.asarray(rec.thrust, dtype=np.float64)
@@ -136,6 +142,21 @@ def feedback_z(rec: Recording) -> float:
         if den > 0:
             rho = float(np.mean(ef * es)) / den
             best = max(best, abs(rho) * math.sqrt(len(ef)))
+    return min(best, _high_band_z(rec))
+
+
+def _high_band_z(rec: Recording) -> float:
+    """|correlation|·sqrt(N) of the thrust with the speed or position above 0.3 fs."""
+    fs = rec.sample_rate_hz
+    hp = butter(4, 0.3 * fs, btype="highpass", fs=fs, output="sos")
+    f = sosfiltfilt(hp, rec.thrust)[20:-20]
+    best = 0.0
+    for sig in (rec.speed, rec.position):
+        z = sosfiltfilt(hp, sig)[20:-20]
+        den = float(np.std(f) * np.std(z))
+        if den > 0:
+            rho = float(np.mean((f - f.mean()) * (z - z.mean()))) / den
+            best = max(best, abs(rho) * math.sqrt(len(f)))
     return best
 
 
