@@ -97,10 +97,12 @@ def _draw_ridges(ax: Any, ridges: Sequence[Mapping[str, Any]], fmax: float,
 def h1_gain_phase(f_norm: ArrayLike, h1: ArrayLike, sample_rate_hz: float,
                   peaks: Sequence[Mapping[str, Any]] = (), title: str = "",
                   name: str = "h1", phase: bool = True,
-                  excited: Sequence[tuple[float, float]] | None = None) -> Plot:
+                  excited: Sequence[tuple[float, float]] | None = None,
+                  gain_unit: str = "") -> Plot:
     """Gain (dB) and phase (deg) of H1 over [0, 0.5] cycles/sample, peaks marked
     (``phase=False``: gain only, for magnitudes without phase). ``excited``: the intervals
-    (cycles/sample) where the estimation input has power, shaded.
+    (cycles/sample) where the estimation input has power, shaded. ``gain_unit``: the unit of
+    |H1| (output unit per input unit), for the axis label "gain (dB re 1 unit)".
 
     ``data``: ``f_norm``, ``gain_db``, ``phase_deg`` (empty without phase) and ``peaks``
     [(freq_norm, gain_db)] as drawn.
@@ -131,7 +133,7 @@ def h1_gain_phase(f_norm: ArrayLike, h1: ArrayLike, sample_rate_hz: float,
     marks = _mark_peaks(ax_g, pk)
     if pk or excited:
         ax_g.legend(loc="upper right")
-    ax_g.set_ylabel("gain (dB)")
+    ax_g.set_ylabel(f"gain (dB re 1 {gain_unit})" if gain_unit else "gain (dB)")
     ax_g.set_title(title or "first-order GFRF H1(f)")
     ax_g.set_xlim(0.0, 0.5)
     hz_axis(ax_g, sample_rate_hz)
@@ -156,9 +158,9 @@ def _h1_caption(pk: list[tuple[float, float]], fs: float, phase: bool,
     top = max(pk, key=lambda p: p[1]) if pk else None
     where = (f"; largest peak {top[1]:.1f} dB at {top[0]:.4f} cycles/sample = "
              f"{top[0] * fs:.2f} Hz" if top else "")
-    spans = ", ".join(f"{lo:.4f}-{hi:.4f} ({lo * fs:.1f}-{hi * fs:.1f} Hz)"
+    spans = ", ".join(f"{lo:.4f}-{hi:.4f} cycles/sample ({lo * fs:.1f}-{hi * fs:.1f} Hz)"
                       for lo, hi in excited or ())
-    band = (f"; shaded: where the estimation input has power, {spans} cycles/sample "
+    band = (f"; shaded: where the estimation input has power, {spans} "
             "(elsewhere H1 is extrapolated)" if spans else "")
     return (f"First-order GFRF H1: gain{' and phase' if phase else ''}{where}{band} "
             "(Figs. 12, 15 of Liu et al. 2005).")

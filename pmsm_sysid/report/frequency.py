@@ -55,6 +55,16 @@ def _view(g: Mapping[str, Any], model_json: Mapping[str, Any] | None) -> float:
     return plots.view_fmax(freqs)
 
 
+def _ratio(input_name: str, output_name: str) -> str:
+    """The unit of |H1| from input to output, e.g. ``(m/s)/N``; '' when one is unknown."""
+    from ..plots.signals import UNITS
+
+    u, y = UNITS.get(input_name), UNITS.get(output_name)
+    if not (u and y):
+        return ""
+    return f"{f'({y})' if '/' in y else y}/{u}"
+
+
 def _excited(model_json: Mapping[str, Any] | None) -> list[tuple[float, float]] | None:
     """Where the estimation input has power (cycles/sample), when the JSON says: a narrow
     band around each tone of a tonal input (the stretch between tones holds no power), the
@@ -107,7 +117,8 @@ def model_sections(model: NarxModel, g: Mapping[str, Any], sink: Sink,
     title = f"{model.input_name} → {model.output_name} model"
     blocks: list[Block] = [
         sink.figure(plots.h1_gain_phase(f1, h1, fs, g["h1"]["peaks"], f"H1(f), {title}",
-                                        excited=_excited(model_json))),
+                                        excited=_excited(model_json),
+                                        gain_unit=_ratio(model.input_name, model.output_name))),
         sink.figure(plots.h2_contour(f2, h2, fs, g["h2"]["ridges"],
                                      f"|H2(f1, f2)|, {title}")),
         sink.figure(plots.h2_surface(f2, h2, fs, g["h2"]["ridges"])),
