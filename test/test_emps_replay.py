@@ -5,8 +5,8 @@ identifier and GFRF nodes, offline ``identify`` of the same windows, ``diagnose`
 recording has no speed topic, so the identifier derives speed from position live, by the
 same causal differentiator the offline readers use; every window it fits (speed and
 position) must be the model ``identify`` finds offline on the same samples: the same terms,
-estimates equal to 1e-9. A slice of the recording keeps the replay short (4 s at its own
-pace); ``diagnose`` reads the whole recording.
+estimates equal to 1e-9. A slice of the recording keeps the replay short (4 s of its own
+pace, at half speed); ``diagnose`` reads the whole recording.
 """
 
 from __future__ import annotations
@@ -48,8 +48,10 @@ def _replay_into_pipeline(bag: Path, env: dict[str, str], ctx: Any,
                         identifier_params={"queue_size": 64},
                         gfrf_params={"orders": [1], "queue_size": 64}) as pipe:
         replay = subprocess.Popen(
+            # half its own pace: a subscriber starved for up to 2 s (a busy machine) still
+            # loses nothing from its queue of 1000 messages
             [sys.executable, "-m", "pmsm_sysid.cli", "replay", str(bag), "--wait", "60",
-             "--subscribers", "2", "--json", "-"],
+             "--subscribers", "2", "--rate", "0.5", "--json", "-"],
             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
             deadline = time.monotonic() + 180
