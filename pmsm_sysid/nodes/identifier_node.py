@@ -167,10 +167,11 @@ class IdentifierNode(Node):
         check_identifier(candidate)
         if TRACKER_KEYS & changes.keys():
             config = tracker_config(candidate)
+            process = self._processor(config)  # first: nothing changes if this fails
             self.engine.config = replace(self.engine.config, window=config.window,
                                          hop=config.hop, history=config.history)
             self.engine.scheduler.resize(config.window, config.hop, config.history)
-            self._fit.switch(self._processor(config), (config.window, config.history))
+            self._fit.switch(process, (config.window, config.history))
             self.settings_changes += 1
         self.params = candidate
         self.get_logger().info(  # type: ignore[no-untyped-call]
