@@ -255,13 +255,14 @@ def build_pipeline(
     identifier_params: Mapping[str, Any] | None = None,
     sim_params: Mapping[str, Any] | None = None, gfrf_params: Mapping[str, Any] | None = None,
     context: Context | None = None, domain_id: int | None = None, wait_s: float = 0.0,
-    ros_args: Sequence[str] | None = None,
+    subscribers: int = 1, ros_args: Sequence[str] | None = None,
     gfrf_every_model: bool = False,
 ) -> Iterator[Pipeline]:
     """Create ``nodes`` in one process and yield the :class:`Pipeline` (see module doc).
 
     ``wait_s``: with the sim node but no identifier here, wait up to that long for another
-    process to subscribe to the input topics before the sim starts (0 = start at once).
+    process to subscribe to the input topics before the sim starts (0 = start at once);
+    ``subscribers``: how many subscribers per input topic to wait for (default 1).
     ``ros_args``: ROS arguments (``--ros-args --params-file F -p name:=value -r a:=b``) for
     the private context (:mod:`.rosargs`); not with a caller's ``context``, whose own
     arguments apply. The keyword arguments here win over them.
@@ -300,7 +301,7 @@ def build_pipeline(
             if pipe.stepped:
                 pipe.sim.stop_timer()  # stepped by the pipeline (back-pressure)
             elif pipe.sim is not None and wait_s > 0 and "identifier" not in names:
-                _wait_until_matched(pipe.sim, executor, wait_s)
+                _wait_until_matched(pipe.sim, executor, wait_s, subscribers)
             pipe.started = time.monotonic()
             yield pipe
         finally:
@@ -324,16 +325,18 @@ def _context(context: Context | None, domain_id: int | None, session: Any,
         executor.shutdown(timeout_sec=2.0)
 
 
-def _wait_until_matched(sim: Any, executor: SingleThreadedExecutor, wait_s: float) -> bool:
-    """Hold the sim node until each of its input publishers is matched by a subscriber in
-    another process (or ``wait_s`` passes), then start it: nothing is published into the
-    void while the two processes discover each other."""
+def _wait_until_matched(sim: Any, executor: SingleThreadedExecutor, wait_s: float,
+                        subscribers: int = 1) -> bool:
+    """Hold the sim node until each of its input publishers is matched by ``subscribers``
+    subscribers in other processes (or ``wait_s`` passes), then start it: nothing is
+    published into the void while the processes discover each other (an identifier that
+    records is two: the recorder is a process of its own)."""
     pubs = sim.input_publishers
     sim.stop_timer()
     try:
         deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline and sim.context.ok():
-            if all(p.get_subscription_count() > 0 for p in pubs):
+            if all(p.get_subscription_count() >= subscribers for p in pubs):
                 return True
             executor.spin_once(timeout_sec=0.1)
         return False

@@ -92,7 +92,7 @@ def test_two_processes_give_the_one_process_models(ros_context: Any, ros_env: in
         err_lines = _Lines(ident)
         err_lines.wait_for("running", 120)  # the identification side spins
         sim = subprocess.run([*CLI, "--nodes", "sim", "--clock", "sim", "--rate", "1",
-                              "--wait", "60",
+                              "--wait", "60", "--subscribers", "2",  # identifier, recorder
                               "--plant", str(PLANT), "--seed", "7", "--duration", str(SECONDS),
                               "--json", str(tmp_path / "sim.json")],
                              env=env, capture_output=True, text=True, timeout=120)

@@ -48,6 +48,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--wait", type=float, default=0.0, metavar="S",
                    help="--nodes sim without identifier: wait up to S s for a subscriber "
                         "on the input topics before the first sample (default 0)")
+    p.add_argument("--subscribers", type=int, default=1, metavar="N",
+                   help="with --wait: wait for N subscribers on each input topic (default 1; "
+                        "2 for an identifier that also records)")
     p.add_argument("--window", type=int, default=None, help="samples per fit (default 1000)")
     p.add_argument("--hop", type=int, default=None, help="samples between fits (default 250)")
     p.add_argument("--method", choices=("iofr", "ofr"), default=None,
@@ -101,6 +104,8 @@ def _check(args: argparse.Namespace) -> None:
         raise PmsmSysidError("--rate applies to --clock sim only")
     if not args.wait >= 0:
         raise PmsmSysidError(f"--wait must be >= 0, got {args.wait}")
+    if args.subscribers < 1:
+        raise PmsmSysidError(f"--subscribers must be >= 1, got {args.subscribers}")
     if args.report is not None:
         from pathlib import Path
 
@@ -152,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
     plant = load_plant(args.plant) if args.plant else None
     with build_pipeline(nodes, plant=plant, excitation=args.excitation, seed=args.seed,
                         clock=args.clock, rate=args.rate, namespace=args.namespace,
-                        record=args.record, wait_s=args.wait,
+                        record=args.record, wait_s=args.wait, subscribers=args.subscribers,
                         ros_args=getattr(args, "ros_args", None),
                         identifier_params=params["identifier"],
                         sim_params=params["sim"], gfrf_params=params["gfrf"]) as pipe, \
