@@ -36,6 +36,7 @@ def run_cli(tmp_path: Path, model: dict | Path, *extra: str) -> tuple[int, dict 
     else:
         path = model
     out = tmp_path / "gfrf.json"
+    out.unlink(missing_ok=True)  # outputs are never replaced without --force
     rc = main(["gfrf", str(path), "--json", str(out), *extra])
     return rc, json.loads(out.read_text()) if out.exists() else None
 
@@ -140,7 +141,7 @@ def test_bad_options_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixtu
 
 
 @pytest.mark.parametrize("content, text", [
-    ("{not json", "not readable JSON"),
+    ("{not json", "not valid JSON"),
     ('{"foo": 1}', "not a model JSON"),
     ('{"terms": [{"name": "x(k-1)", "estimate": 1.0}]}', "cannot parse term"),
     ('{"terms": [{"name": "u(k-1)"}]}', "not a model JSON"),

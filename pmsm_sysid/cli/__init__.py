@@ -57,7 +57,12 @@ def build_parser() -> argparse.ArgumentParser:
         if verb in ROS_VERBS:
             p.formatter_class = argparse.RawDescriptionHelpFormatter
             p.epilog = (p.epilog or "") + ROS_ARGS_HELP
-        p.set_defaults(_run=mod.run)
+        outputs = getattr(mod, "OUTPUTS", {})
+        if outputs and "--force" not in p._option_string_actions:
+            p.add_argument("--force", action="store_true",
+                           help="replace existing output files (never a directory of other "
+                                "things)")
+        p.set_defaults(_run=mod.run, _outputs=outputs)
     return parser
 
 
@@ -90,6 +95,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.environ.setdefault(var, "1")
     from ..core.errors import PmsmSysidError
     from ..rosargs import ROS_VERBS, check_ros_args, split_ros_args
+    from .common import check_outputs
 
     parser = build_parser()
     own, ros_args = split_ros_args(sys.argv[1:] if argv is None else argv)
@@ -107,6 +113,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         silence()
     try:
         check_ros_args(ros_args)  # before any work: a missing params file is bad input
+        check_outputs(args, args._outputs)  # before any work: a long run must not end unwritten
         return int(args._run(args))
     except PmsmSysidError as exc:
         print(f"pmsm-sysid {args.verb}: error: {exc}", file=sys.stderr)

@@ -22,29 +22,82 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
-def write_json(obj: Any, dest: str | None) -> None:
-    """Write ``obj`` as JSON to ``dest`` (a path, or ``-`` for stdout); no-op for None."""
+def write_json(obj: Any, dest: str | None, option: str = "--json") -> None:
+    """Write ``obj`` as JSON to ``dest`` (a path, or ``-`` for stdout); no-op for None.
+
+    A file is written under a temporary name and renamed into place, so it is either complete
+    or absent. If it cannot be written now (checked at the start, so only when the place
+    changed meanwhile), the result is saved in the temporary directory instead and the error
+    names where: a long run never loses its result.
+    """
     if dest is None:
         return
-    text = json.dumps(_clean(obj), indent=2, allow_nan=False)
+    text = json.dumps(_clean(obj), indent=2, allow_nan=False) + "\n"
     if dest == "-":
-        sys.stdout.write(text + "\n")
-    else:
-        path = Path(dest)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text + "\n")
+        sys.stdout.write(text)
+        return
+    from ..core.errors import OutputError
+    from ..validate import atomic_write_text, rescue_path
+
+    try:
+        atomic_write_text(dest, text, option)
+    except OutputError as exc:
+        spare = rescue_path("pmsm-sysid-" + Path(dest).stem)
+        try:
+            atomic_write_text(spare, text, option)
+        except OutputError:
+            raise exc from None
+        raise OutputError(f"{exc}; the result was saved to {spare} instead") from exc
+
+
+def write_text(text: str, dest: str | Path, option: str) -> None:
+    """Write a text result (e.g. a plant file) atomically, as :func:`write_json`."""
+    from ..validate import atomic_write_text
+
+    atomic_write_text(dest, text, option)
+
+
+#: What each kind of output option holds, for :func:`check_outputs`.
+OUTPUT_KINDS = ("file", "bag", "report")
+
+
+def check_outputs(args: Any, outputs: dict[str, str]) -> None:
+    """Check every output path of a verb before any work starts (one shared rule).
+
+    ``outputs`` maps an argument name (``json``, ``out``, ``record``, ``report``...) to what it
+    holds: ``file``, ``bag`` (a rosbag2 directory) or ``report`` (a directory with an
+    ``index.html``). Missing parent directory, a directory where a file is expected, an
+    existing result without ``--force``, a place that cannot be written: one OutputError.
+    """
+    from ..core.errors import OutputError
+    from ..validate import check_output_dir, check_output_file, is_bag_dir
+
+    force = bool(getattr(args, "force", False))
+    seen: dict[Path, str] = {}
+    for attr, kind in outputs.items():
+        value = getattr(args, attr, None)
+        if value is None or value == "-":
+            continue
+        option = "--" + attr.replace("_", "-")
+        if kind == "file":
+            check_output_file(value, option, force=force)
+        elif kind == "bag":
+            check_output_dir(value, option, force=force, is_ours=is_bag_dir,
+                             what="rosbag2 directory")
+        else:
+            check_output_dir(value, option, force=force,
+                             is_ours=lambda p: (p / "index.html").is_file(), what="report")
+        key = Path(value).resolve()
+        if key in seen:
+            raise OutputError(f"{option} and {seen[key]} name the same path {value}")
+        seen[key] = option
 
 
 def read_json(path: str) -> Any:
-    """Read a JSON result file, raising the project's DataError on any problem."""
-    from ..core.errors import DataError
+    """Read a JSON result file (an object), raising the project's DataError on any problem."""
+    from ..validate import read_json_object
 
-    try:
-        return json.loads(Path(path).read_text())
-    except FileNotFoundError as exc:
-        raise DataError(f"{path}: no such file") from exc
-    except (OSError, ValueError) as exc:
-        raise DataError(f"{path}: not readable JSON ({exc})") from exc
+    return read_json_object(path, "a result JSON of pmsm-sysid")
 
 
 def parse_range(text: str) -> tuple[int, int]:
@@ -77,14 +130,11 @@ def parse_fraction(text: str) -> float:
 def replace_bag_dir(out: Path, force: bool) -> None:
     """Make room for a new bag at ``out``: refuse unless ``force``, and never delete a
     directory that is not a rosbag2 bag."""
-    from ..core.errors import BagError
+    from ..validate import check_output_dir, is_bag_dir
 
     if not out.exists():
         return
-    if not force:
-        raise BagError(f"{out} exists already; use --force to replace it")
-    if not out.is_dir() or not (out / "metadata.yaml").is_file():
-        raise BagError(f"{out} exists and is not a rosbag2 directory; not replacing it")
+    check_output_dir(out, "--out", force=force, is_ours=is_bag_dir, what="rosbag2 directory")
     import shutil
 
     shutil.rmtree(out)

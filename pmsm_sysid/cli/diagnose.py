@@ -15,9 +15,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import parse_fraction, write_json
+from .common import parse_fraction, write_json, write_text
 
 HELP = "sim-to-real: locate the mismatch, name the missing physics, model it, show the fit"
+#: Output options, checked before any work starts (see common.check_outputs).
+OUTPUTS = {"json": "file", "corrected_plant": "file", "report": "report"}
 
 
 
@@ -63,12 +65,12 @@ def run(args: argparse.Namespace) -> int:
     print(found.summary(), file=out)
     write_json(found.to_dict(), args.json)
     if args.corrected_plant:
-        path = Path(args.corrected_plant)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(found.corrected.to_yaml())
+        write_text(found.corrected.to_yaml(), args.corrected_plant, "--corrected-plant")
     if args.report:
         from ..report.diagnose import write_report
+        from ..validate import atomic_dir
 
-        index = write_report(found.result, args.report, title=f"{args.plant} vs {args.real}")
-        print(f"report: {index}", file=out)
+        with atomic_dir(args.report, "--report") as tmp:  # complete, or none at all
+            index = write_report(found.result, tmp, title=f"{args.plant} vs {args.real}")
+        print(f"report: {Path(args.report) / Path(index).relative_to(tmp)}", file=out)
     return 0

@@ -18,6 +18,8 @@ from typing import Any, TextIO
 from .common import write_json
 
 HELP = "GFRFs, H1 peaks, H2/H3 ridges and poles of an identified model (identify JSON)"
+#: Output options, checked before any work starts (see common.check_outputs).
+OUTPUTS = {"json": "file"}
 MAX_ORDER = 4
 
 

@@ -16,6 +16,8 @@ from typing import Any
 from .common import parse_fraction, parse_range, write_json
 
 HELP = "offline NARX identification by OFR on one recording"
+#: Output options, checked before any work starts (see common.check_outputs).
+OUTPUTS = {"json": "file"}
 
 
 def _count(text: str) -> int:

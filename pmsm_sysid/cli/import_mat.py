@@ -15,6 +15,8 @@ from pathlib import Path
 from typing import Any
 
 HELP = "convert the EMPS .mat layout into a recording (thrust = gtau*vir, position = qm)"
+#: Output options, checked before any work starts (see common.check_outputs).
+OUTPUTS = {"json": "file", "out": "bag"}
 
 REQUIRED = ("t", "qm", "vir", "gtau")
 
@@ -82,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
     from ..bagio import read_recording, write_recording
     from ..core.align import robust_period
     from ..core.signals import Recording, derive_speed
+    from ..validate import atomic_dir
     from .common import write_json
 
     mat = load_mat(args.mat)
@@ -93,9 +96,10 @@ def run(args: argparse.Namespace) -> int:
                     sample_rate_hz=1.0 / robust_period(t), speed_derived=True,
                     source=str(Path(args.mat).resolve()), meta=meta)
     extra = {"reference": mat["qg"]} if "qg" in mat else None
-    write_recording(args.out, rec, namespace=args.namespace, storage=args.storage,
-                    extra_points=extra)
-    loaded = read_recording(args.out, namespace=args.namespace)
+    with atomic_dir(args.out, "--out") as tmp:  # complete and readable, or not there at all
+        write_recording(tmp, rec, namespace=args.namespace, storage=args.storage,
+                        extra_points=extra)
+        loaded = read_recording(tmp, namespace=args.namespace)
     print(f"wrote {args.out}: {len(loaded.recording)} samples at "
           f"{loaded.recording.sample_rate_hz:.6g} Hz; thrust = gtau*vir, position = qm"
           f"{', reference = qg' if extra else ''}; no speed sensor: speed derived on reading")

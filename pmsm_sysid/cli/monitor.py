@@ -12,6 +12,8 @@ import sys
 from typing import Any, TextIO
 
 HELP = "live view of the topics: rates, last values, gaps, latest model, ridges, validation"
+#: Output options, checked before any work starts (see common.check_outputs).
+OUTPUTS = {"json": "file"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -8,6 +8,8 @@ from pathlib import Path
 from typing import Any
 
 HELP = "records the topics (inputs and outputs) to a rosbag2"
+#: Output options, checked before any work starts (see common.check_outputs).
+OUTPUTS = {"json": "file", "out": "bag"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

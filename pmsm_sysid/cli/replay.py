@@ -6,6 +6,8 @@ import argparse
 import sys
 
 HELP = "publishes a recording on the topics (--rate, --loop)"
+#: Output options, checked before any work starts (see common.check_outputs).
+OUTPUTS = {"json": "file"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
 HELP = "run the sim motor, identifier and GFRF nodes in one process (live pipeline)"
+#: Output options, checked before any work starts (see common.check_outputs).
+OUTPUTS = {"json": "file", "record": "bag"}
 
 EPILOG = """\
 examples:
@@ -149,12 +152,14 @@ def run(args: argparse.Namespace) -> int:
     from ..app import build_pipeline, parse_nodes
     from ..core.plant import load_plant
     from ..rosutil import stop_on_signals
-    from .common import write_json
+    from .common import replace_bag_dir, write_json
 
     _check(args)
     nodes = parse_nodes(args.nodes)
     params = node_params(args)
     plant = load_plant(args.plant) if args.plant else None
+    if args.record:
+        replace_bag_dir(Path(args.record), args.force)  # checked at the start: ours to replace
     with build_pipeline(nodes, plant=plant, excitation=args.excitation, seed=args.seed,
                         clock=args.clock, rate=args.rate, namespace=args.namespace,
                         record=args.record, wait_s=args.wait, subscribers=args.subscribers,

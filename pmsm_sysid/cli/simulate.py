@@ -9,6 +9,8 @@ from pathlib import Path
 from typing import Any
 
 HELP = "offline: run the motor model faster than real time and write a recording"
+#: Output options, checked before any work starts (see common.check_outputs).
+OUTPUTS = {"json": "file", "out": "bag"}
 
 EXCITATIONS = ("paper-speed", "paper-position", "multisine", "chirp", "prbs", "aprbs")
 
@@ -70,11 +72,10 @@ def run(args: argparse.Namespace) -> int:
     from ..core.physics import effective_substeps
     from ..core.plant import plant_to_dict
     from ..progress import activity
-    from .common import replace_bag_dir, write_json
+    from ..validate import atomic_dir
+    from .common import write_json
 
     out = Path(args.out)
-    if not args.force:
-        replace_bag_dir(out, force=False)  # refuses an existing bag before any work
     started = time.perf_counter()
     with activity("simulate") as say:
         sim = simulation_run(args.plant, excitation=args.excitation, duration=args.duration,
@@ -83,8 +84,8 @@ def run(args: argparse.Namespace) -> int:
         rec, plant, source = sim.recording, sim.plant, sim.source
         sim_s = time.perf_counter() - started
         say("writing the recording")
-        replace_bag_dir(out, args.force)
-        write_recording(out, rec, namespace=args.namespace, storage=args.storage)
+        with atomic_dir(out, "--out") as tmp:  # complete, or not there at all
+            write_recording(tmp, rec, namespace=args.namespace, storage=args.storage)
     total_s = time.perf_counter() - started
     n, fs = len(rec), plant.sample_rate_hz
     summary = {

@@ -48,6 +48,11 @@ class BagError(PmsmSysidError):
     """A recording cannot be read or written (missing, corrupt, unknown storage, wrong types)."""
 
 
+class OutputError(PmsmSysidError):
+    """An output path cannot be written: missing directory, a directory where a file is
+    expected, an existing result without ``--force``, no permission."""
+
+
 #: Former name of :class:`PmsmSysidError`, kept so older code that catches it still works.
 SysIdError = PmsmSysidError
 
