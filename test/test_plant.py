@@ -85,10 +85,15 @@ def test_disabled_blocks_by_null_or_enabled_false() -> None:
     assert p.coulomb_friction == CoulombFriction(1.5)
 
 
-def test_electrical_tau_and_numbers_as_strings() -> None:
-    p = plant_from_dict({"rs_ohm": 2.0, "ls_h": "4e-3", "thrust_lag": {"tau_s": "electrical"}})
-    assert p.ls_h == 4e-3  # PyYAML reads 4e-3 (no dot) as a string; accepted as a number
+def test_electrical_tau_and_exponents_without_a_dot(tmp_path: Path) -> None:
+    path = tmp_path / "plant.yaml"  # PyYAML alone reads 4e-3 (no dot) as the string '4e-3'
+    path.write_text("rs_ohm: 2.0\nls_h: 4e-3\nthrust_lag: {tau_s: electrical}\n")
+    p = load_plant(path)
+    assert p.ls_h == 4e-3
     assert p.thrust_lag == ThrustLag(tau_s=2e-3)
+    path.write_text("ls_h: '4e-3'\n")  # a quoted string is a string, never a number
+    with pytest.raises(PlantError, match="ls_h must be a number, got '4e-3'"):
+        load_plant(path)
 
 
 def test_harmonics_parse() -> None:

@@ -10,8 +10,6 @@ writing ``null``, or ``enabled: false``.
 
 from __future__ import annotations
 
-import difflib
-import math
 import typing
 from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, fields, is_dataclass, replace
@@ -19,6 +17,13 @@ from pathlib import Path
 from typing import Any
 
 from .errors import PlantError
+from .plant_schema import (
+    MAX_FILE_BYTES,
+    _unknown,
+    check_value,
+    validate_plant_mapping,
+    yaml_loader,
+)
 
 #: Default velocity scale of the sign(v) regularisation, tanh(v / smoothing_mps).
 SIGN_SMOOTHING_MPS = 1e-3
@@ -210,29 +215,8 @@ EFFECT_BLOCKS: dict[str, type] = {
     "quantisation": Quantisation,
 }
 
-# Field constraints: ">0" strictly positive, ">=0" non-negative, "|<1" magnitude below one.
-_RULES: dict[str, str] = {
-    "mass_kg": ">0", "viscous_n_per_mps": ">=0", "rs_ohm": ">0", "ls_h": ">0", "flux_wb": ">0",
-    "sample_rate_hz": ">0", "substeps": ">0", "pitch_m": ">0", "velocity_mps": ">0",
-    "smoothing_mps": ">0", "tau_s": ">=0", "delay_s": ">=0", "stiffness_n_per_m": ">=0",
-    "speed_std": ">=0", "position_std": ">=0", "force_std": ">=0", "thrust_std": ">=0",
-    "position_m": ">=0",
-    "speed_mps": ">=0", "order": ">0", "relative": "|<1", "static_n": ">=0",
-}
-
-
 def _check_value(where: str, name: str, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise PlantError(f"{where}{name} must be a number, got {value!r}")
-    if not math.isfinite(value):
-        raise PlantError(f"{where}{name} must be finite, got {value}")
-    rule = _RULES.get(name)
-    if rule == ">0" and not value > 0:
-        raise PlantError(f"{where}{name} must be > 0, got {value}")
-    if rule == ">=0" and value < 0:
-        raise PlantError(f"{where}{name} must be >= 0, got {value}")
-    if rule == "|<1" and not abs(value) < 1:
-        raise PlantError(f"{where}{name} must be between -1 and 1, got {value}")
+    check_value(where, name, value)
 
 
 def _check_block(where: str, block: Any) -> None:
@@ -261,8 +245,6 @@ def _check_plant(p: Plant) -> None:
             _check_value("", f.name, value)
     if not isinstance(p.substeps, int):
         raise PlantError(f"substeps must be an integer, got {p.substeps!r}")
-    if p.substeps > 4096:
-        raise PlantError(f"substeps must be at most 4096, got {p.substeps}")
 
 
 def nominal_plant() -> Plant:
@@ -278,22 +260,8 @@ def electrical_lag(plant: Plant) -> ThrustLag:
 # ----------------------------------------------------------------------------- dict / YAML
 
 
-def _unknown(where: str, keys: list[str], valid: list[str]) -> PlantError:
-    parts = []
-    for key in keys:
-        close = difflib.get_close_matches(str(key), valid, n=1)
-        parts.append(f"'{key}'" + (f" (did you mean '{close[0]}'?)" if close else ""))
-    return PlantError(f"unknown key{'s' if len(keys) > 1 else ''} {where}{', '.join(parts)}"
-                      f"; valid: {', '.join(valid)}")
-
-
 def _coerce(where: str, name: str, value: Any, want: Any) -> Any:
-    """Convert one YAML value to the field's type; numbers written as strings are accepted."""
-    if isinstance(value, str) and want in (float, int):
-        try:
-            value = float(value)
-        except ValueError as exc:
-            raise PlantError(f"{where}{name} must be a number, got '{value}'") from exc
+    """Convert one validated value to the field's type (a string is never a number)."""
     _check_value(where, name, value)
     if want is int:
         if float(value) != int(value):
@@ -346,8 +314,7 @@ def _block_from(name: str, value: Any, context: Mapping[str, Any]) -> Any:
 
 def plant_from_dict(d: Mapping[str, Any]) -> Plant:
     """Build and validate a :class:`Plant` from a plant-file mapping (missing keys = nominal)."""
-    if not isinstance(d, Mapping):
-        raise PlantError(f"a plant must be a mapping of keys, got {type(d).__name__}")
+    validate_plant_mapping(d)  # the schema: every key, type and bound, before anything else
     nominal = Plant()
     context = {"ls_h": d.get("ls_h", nominal.ls_h), "rs_ohm": d.get("rs_ohm", nominal.rs_ohm)}
     for key in ("ls_h", "rs_ohm"):
@@ -394,17 +361,21 @@ def load_plant(path: str | Path) -> Plant:
         packaged = packaged_plant_path(p.name)
         p = packaged if packaged.is_file() else p
     try:
+        if p.is_file() and p.stat().st_size > MAX_FILE_BYTES:
+            raise PlantError(f"{p}: {p.stat().st_size} bytes, too large for a plant file")
         text = p.read_text()
     except FileNotFoundError as exc:
         raise PlantError(f"{p}: no such plant file") from exc
     except (OSError, UnicodeDecodeError) as exc:
         raise PlantError(f"{p}: cannot read plant file ({exc.__class__.__name__})") from exc
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=yaml_loader())  # a SafeLoader subclass
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         at = f" at line {mark.line + 1}" if mark is not None else ""
         raise PlantError(f"{p}: not valid YAML{at}") from exc
+    except RecursionError as exc:
+        raise PlantError(f"{p}: YAML nested too deeply for a plant file") from exc
     if data is None:
         data = {}
     if not isinstance(data, Mapping):
