@@ -28,6 +28,8 @@ from .core.errors import DataError, OptionError, OutputError
 MAX_SAMPLES = 10_000_000
 #: Largest seed accepted (numpy's generators take any integer >= 0; this keeps it printable).
 MAX_SEED = 2**63 - 1
+#: Largest thrust amplitude (N) an excitation may ask for.
+MAX_AMPLITUDE_N = 1e6
 #: Largest JSON input read (a model, a result): far above what any verb writes.
 MAX_JSON_BYTES = 64 * 1024 * 1024
 
@@ -214,7 +216,7 @@ def check_duration(value: Any, option: str = "--duration", *, rate_hz: float = 5
     """Seconds of data: positive, finite, and at most :data:`MAX_SAMPLES` samples."""
     x = check_number(option, value, low=0.0, low_open=True, unit="s")
     if x * rate_hz > MAX_SAMPLES:
-        raise OptionError(f"{option} {value} s at {rate_hz:g} Hz is {x * rate_hz:.3g} samples, "
+        raise OptionError(f"{option} {x:g} s at {rate_hz:g} Hz is {x * rate_hz:.3g} samples, "
                           f"more than the limit of {MAX_SAMPLES}; record in parts")
     return x
 

@@ -13,6 +13,7 @@ from ..core.errors import OptionError
 from ..core.excitation import EXCITATIONS, ExcitationSource
 from ..core.plant import Plant, load_plant, nominal_plant
 from ..core.signals import Recording
+from ..validate import MAX_AMPLITUDE_N, check_duration, check_number, check_seed
 from . import _checks
 
 PlantLike = Plant | str | os.PathLike[str] | None
@@ -48,12 +49,12 @@ def simulation_run(plant: PlantLike = None, *, excitation: str = "paper-speed",
 
     _checks.choice("excitation", excitation, EXCITATIONS)
     seconds = _checks.positive("duration", duration)
-    if isinstance(seed, bool) or not isinstance(seed, int):
-        raise OptionError(f"seed must be an integer, got {seed!r}")
+    check_seed(seed, "seed")
     if amplitude is not None:
-        _checks.positive("amplitude", amplitude)
+        check_number("amplitude", amplitude, low=0, high=MAX_AMPLITUDE_N, unit="N")
     model, label = resolve_plant(plant)
     fs = model.sample_rate_hz
+    check_duration(seconds, "duration", rate_hz=fs)  # at most MAX_SAMPLES samples
     n = max(2, round(seconds * fs))
     source = ExcitationSource(excitation, fs, seed=seed, amplitude_n=amplitude,
                               **dict(excitation_options or {}))

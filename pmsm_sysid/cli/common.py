@@ -8,6 +8,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..validate import MAX_AMPLITUDE_N as MAX_AMPLITUDE_N  # for the verbs
+
 
 def _clean(obj: Any) -> Any:
     """Make numpy scalars/arrays and non-finite floats JSON-safe (NaN/Inf -> null)."""
@@ -125,6 +127,84 @@ def parse_fraction(text: str) -> float:
     if not 0 < value < 1:
         raise argparse.ArgumentTypeError(f"expected a number in (0, 1), got '{text}'")
     return value
+
+
+#: Longest --duration of a live verb (run, record, monitor): 11.6 days; without --duration
+#: they run until Ctrl-C or SIGTERM.
+MAX_LIVE_S = 1e6
+
+
+def _argtype(check: Any, name: str) -> Any:
+    """An argparse type: parse a number, then ``check`` it; any problem is a usage error."""
+    import argparse
+
+    from ..core.errors import OptionError
+
+    def parse(text: str) -> Any:
+        try:
+            value: Any = int(text)
+        except ValueError:
+            try:
+                value = float(text)
+            except ValueError:
+                raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from None
+        try:
+            return check(value)
+        except OptionError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix("value ")) from exc
+
+    parse.__name__ = name
+    return parse
+
+
+def number(low: float | None = None, high: float | None = None, *,
+           low_open: bool = False, unit: str = "") -> Any:
+    """argparse type: a finite number in [low, high] ((low, high] with ``low_open``)."""
+    from ..validate import check_number
+
+    return _argtype(lambda v: check_number("value", v, low=low, high=high, low_open=low_open,
+                                           unit=unit), "number")
+
+
+def count(low: int = 0, high: int | None = None) -> Any:
+    """argparse type: an integer in [low, high]."""
+    from ..validate import check_int
+
+    return _argtype(lambda v: check_int("value", v, low=low, high=high), "integer")
+
+
+def seed_type(text: str) -> int:
+    """argparse type of ``--seed``: an integer 0 .. 2**63-1."""
+    from ..validate import MAX_SEED
+
+    result: int = count(0, MAX_SEED)(text)
+    return result
+
+
+def live_seconds(text: str) -> float:
+    """argparse type of a live verb's ``--duration``: finite, > 0, at most :data:`MAX_LIVE_S`."""
+    result: float = number(0, MAX_LIVE_S, low_open=True, unit="s")(text)
+    return result
+
+
+def wait_seconds(text: str) -> float:
+    """argparse type of ``--wait``: finite, >= 0, at most :data:`MAX_LIVE_S`."""
+    result: float = number(0, MAX_LIVE_S, unit="s")(text)
+    return result
+
+
+def ros_name(text: str) -> str:
+    """argparse type of ``--namespace`` and topic names: a valid ROS 2 name, checked before
+    rclpy (or a bag's topic list) sees it."""
+    import argparse
+
+    from ..core.errors import OptionError
+    from ..validate import check_namespace
+
+    try:
+        return check_namespace(text, "name")
+    except OptionError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("name ")) from exc
 
 
 def replace_bag_dir(out: Path, force: bool) -> None:

@@ -15,7 +15,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import parse_fraction, write_json, write_text
+from .common import parse_fraction, ros_name, write_json, write_text
 
 HELP = "sim-to-real: locate the mismatch, name the missing physics, model it, show the fit"
 #: Output options, checked before any work starts (see common.check_outputs).
@@ -30,7 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--real", required=True, metavar="BAG", help="the real recording (rosbag2)")
     p.add_argument("--validate", metavar="BAG2",
                    help="held-out recording (default: the last 30%% of --real)")
-    p.add_argument("--namespace", default=None,
+    p.add_argument("--namespace", type=ros_name, default=None,
                    help="topic namespace or JointState topic (default: auto-detect)")
     p.add_argument("--alpha", type=parse_fraction, default=1e-3,
                    help="family-wise false-alarm level of each selection step (default 1e-3)")

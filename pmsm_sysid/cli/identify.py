@@ -13,23 +13,15 @@ import argparse
 import sys
 from typing import Any
 
-from .common import parse_fraction, parse_range, write_json
+from .common import count, parse_fraction, parse_range, write_json
 
 HELP = "offline NARX identification by OFR on one recording"
 #: Output options, checked before any work starts (see common.check_outputs).
 OUTPUTS = {"json": "file"}
 
 
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected an integer, got '{text}'") from exc
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got '{text}'")
-    return value
-
-
+#: Largest lag (and delay) asked for: 20 s of a 500 Hz recording.
+MAX_LAG = 10_000
 
 
 def add_model_options(p: Any) -> None:
@@ -38,14 +30,15 @@ def add_model_options(p: Any) -> None:
     p.add_argument("--input", default="thrust", choices=("thrust",), help="input signal")
     p.add_argument("--output", default="speed", choices=("speed", "position"),
                    help="output signal (default speed)")
-    p.add_argument("--ny", type=_count, default=30, help="output lags y(k-1..k-ny) (default 30)")
-    p.add_argument("--nu", type=_count, default=40,
+    p.add_argument("--ny", type=count(0, MAX_LAG), default=30,
+                   help="output lags y(k-1..k-ny) (default 30)")
+    p.add_argument("--nu", type=count(0, MAX_LAG), default=40,
                    help="input lags u(k-d..k-d-nu+1) (default 40)")
     p.add_argument("--degree", type=int, choices=(1, 2, 3), default=2,
                    help="polynomial degree (default 2)")
-    p.add_argument("--terms", type=_count, default=15,
+    p.add_argument("--terms", type=count(1, 10_000), default=15,
                    help="number of terms, or the maximum for --criterion err/aic/bic (default 15)")
-    p.add_argument("--delay", type=_count, default=1, help="input delay d (default 1)")
+    p.add_argument("--delay", type=count(0, MAX_LAG), default=1, help="input delay d (default 1)")
     p.add_argument("--estimate", type=parse_range, default=(1000, 2000), metavar="START:STOP",
                    help="estimation samples, 0-based half-open (default 1000:2000)")
     p.add_argument("--validate", type=parse_range, default=(3000, 4000), metavar="START:STOP",
@@ -62,7 +55,7 @@ def add_model_options(p: Any) -> None:
     p.add_argument("--keep-dc", action="store_true",
                    help="ERR on the raw output (Billings/SysIdentPy convention), constant as an "
                         "ordinary candidate")
-    p.add_argument("--corr-lags", type=_count, default=20,
+    p.add_argument("--corr-lags", type=count(1, MAX_LAG), default=20,
                    help="lags of the correlation tests (default 20)")
 
 

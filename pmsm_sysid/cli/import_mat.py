@@ -14,6 +14,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from .common import ros_name
+
 HELP = "convert the EMPS .mat layout into a recording (thrust = gtau*vir, position = qm)"
 #: Output options, checked before any work starts (see common.check_outputs).
 OUTPUTS = {"json": "file", "out": "bag"}
@@ -26,7 +28,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="BAG", help="rosbag2 directory to create")
     p.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap",
                    help="rosbag2 storage plugin (default: mcap)")
-    p.add_argument("--namespace", default="/pmsm", help="topic namespace (default: /pmsm)")
+    p.add_argument("--namespace", type=ros_name, default="/pmsm",
+                   help="topic namespace (default: /pmsm)")
     p.add_argument("--json", metavar="FILE", help="write a summary as JSON ('-' = stdout)")
 
 

@@ -11,19 +11,22 @@ import argparse
 import sys
 from typing import Any, TextIO
 
+from .common import live_seconds, number, ros_name
+
 HELP = "live view of the topics: rates, last values, gaps, latest model, ridges, validation"
 #: Output options, checked before any work starts (see common.check_outputs).
 OUTPUTS = {"json": "file"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--namespace", default="/pmsm",
+    p.add_argument("--namespace", type=ros_name, default="/pmsm",
                    help="the pipeline's namespace: its inputs and results (default /pmsm)")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--duration", type=live_seconds, default=None, metavar="S",
                    help="stop after S seconds (default: until Ctrl-C; 3 s with --once)")
     p.add_argument("--once", action="store_true",
                    help="listen for --duration seconds, print one snapshot and exit")
-    p.add_argument("--interval", type=float, default=0.5, metavar="S",
+    p.add_argument("--interval", type=number(0, 3600, low_open=True, unit="s"),
+                   default=0.5, metavar="S",
                    help="refresh period (default 0.5 s; piped: one snapshot per period)")
     p.add_argument("--json", metavar="FILE", default=None,
                    help="write the last snapshot as JSON ('-' = stdout)")

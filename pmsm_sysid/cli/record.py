@@ -7,6 +7,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from .common import count, live_seconds, ros_name
+
 HELP = "records the topics (inputs and outputs) to a rosbag2"
 #: Output options, checked before any work starts (see common.check_outputs).
 OUTPUTS = {"json": "file", "out": "bag"}
@@ -14,19 +16,19 @@ OUTPUTS = {"json": "file", "out": "bag"}
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="BAG", help="rosbag2 directory to create")
-    p.add_argument("--namespace", default="/pmsm",
+    p.add_argument("--namespace", type=ros_name, default="/pmsm",
                    help="the pipeline's namespace (default /pmsm)")
-    p.add_argument("--topics", nargs="+", metavar="TOPIC", default=None,
+    p.add_argument("--topics", nargs="+", type=ros_name, metavar="TOPIC", default=None,
                    help="record exactly these topics (relative names are taken in the "
                         "namespace; default: the inputs <ns>/thrust|speed|position, the "
                         "results <ns>/model|ridges|ridge_frequencies|validation|change and "
                         "<ns>/stats/*); other types are taken from their publishers")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--duration", type=live_seconds, default=None, metavar="S",
                    help="stop after S seconds (default: until Ctrl-C or SIGTERM)")
     p.add_argument("--storage", choices=("sqlite3", "mcap"), default="sqlite3",
                    help="storage plugin (default sqlite3: flushed every second, survives "
                         "being killed)")
-    p.add_argument("--depth", type=int, default=10000, metavar="N",
+    p.add_argument("--depth", type=count(1, 1_000_000), default=10000, metavar="N",
                    help="subscription queue depth per topic (default 10000)")
     p.add_argument("--force", action="store_true", help="replace an existing bag at --out")
     p.add_argument("--json", metavar="FILE", default=None,

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from .common import count, number, ros_name, wait_seconds
+
 HELP = "publishes a recording on the topics (--rate, --loop)"
 #: Output options, checked before any work starts (see common.check_outputs).
 OUTPUTS = {"json": "file"}
@@ -12,25 +14,27 @@ OUTPUTS = {"json": "file"}
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("bag", metavar="BAG", help="rosbag2 directory (or .mcap/.db3 file)")
-    p.add_argument("--rate", type=float, default=1.0, metavar="R",
+    p.add_argument("--rate", type=number(0, 1e6), default=1.0, metavar="R",
                    help="speed factor on the recorded timing (default 1; 0 = as fast as the "
                         "subscribers' queues allow, same as --fast)")
     p.add_argument("--fast", action="store_true", help="same as --rate 0")
-    p.add_argument("--loop", nargs="?", type=int, const=0, default=1, metavar="N",
+    p.add_argument("--loop", nargs="?", type=count(0, 1_000_000), const=0, default=1,
+                   metavar="N",
                    help="repeat N times (no N: until Ctrl-C); stamps are shifted forward on "
                         "each pass so they keep increasing")
-    p.add_argument("--namespace", default=None,
+    p.add_argument("--namespace", type=ros_name, default=None,
                    help="publish the recorded pipeline's topics (inputs and results) under "
                         "this namespace instead of the recorded one")
-    p.add_argument("--wait", type=float, default=10.0, metavar="S",
+    p.add_argument("--wait", type=wait_seconds, default=10.0, metavar="S",
                    help="wait up to S seconds for subscribers on the input topics before "
                         "starting (default 10; 0 = start at once)")
-    p.add_argument("--subscribers", type=int, default=1, metavar="N",
+    p.add_argument("--subscribers", type=count(1, 1000), default=1, metavar="N",
                    help="wait for N subscribers on each input topic (default 1; e.g. 2 for an "
                         "identifier that also records)")
-    p.add_argument("--burst", type=int, default=500, metavar="N",
+    p.add_argument("--burst", type=count(1, 1_000_000), default=500, metavar="N",
                    help="with --fast: messages per topic per burst (default 500)")
-    p.add_argument("--drain-rate", type=float, default=5000.0, metavar="MSG_PER_S",
+    p.add_argument("--drain-rate", type=number(0, 1e9, low_open=True),
+                   default=5000.0, metavar="MSG_PER_S",
                    help="with --fast: pause after each burst as for a subscriber taking this "
                         "many messages per second (default 5000)")
     p.add_argument("--json", metavar="FILE", default=None,

@@ -7,6 +7,19 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from .common import (
+    MAX_AMPLITUDE_N,
+    count,
+    live_seconds,
+    number,
+    ros_name,
+    seed_type,
+    wait_seconds,
+)
+
+#: Most samples per fit window (200 s at 500 Hz).
+MAX_WINDOW = 100_000
+
 HELP = "run the sim motor, identifier and GFRF nodes in one process (live pipeline)"
 #: Output options, checked before any work starts (see common.check_outputs).
 OUTPUTS = {"json": "file", "record": "bag"}
@@ -29,10 +42,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plant", metavar="PLANT.yaml", help="plant file (default: nominal motor)")
     p.add_argument("--excitation", default="paper-speed",
                    help="paper-speed (default), paper-position, multisine, chirp, prbs, aprbs")
-    p.add_argument("--amplitude", type=float, default=None, metavar="N",
+    p.add_argument("--amplitude", type=number(0, MAX_AMPLITUDE_N, unit="N"),
+                   default=None, metavar="N",
                    help="thrust amplitude in N (default: the excitation's own)")
-    p.add_argument("--seed", type=int, default=0, help="seed of noise and excitation")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--seed", type=seed_type, default=0, help="seed of noise and excitation")
+    p.add_argument("--duration", type=live_seconds, default=None, metavar="S",
                    help="stop after S seconds of data (see below; default: until Ctrl-C)")
     p.add_argument("--nodes", default="sim,identifier,gfrf",
                    help="comma list of sim, identifier, gfrf (default: all three)")
@@ -43,19 +57,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "window, and the last model (also: pmsm-sysid report SUMMARY.json)")
     p.add_argument("--clock", choices=("wall", "sim"), default="wall",
                    help="wall: real time (default); sim: stamps k/fs, faster than real time")
-    p.add_argument("--rate", type=float, default=1.0, metavar="R",
+    p.add_argument("--rate", type=number(0, 1e6), default=1.0, metavar="R",
                    help="with --clock sim and no identifier here: R x real time (0 = max)")
-    p.add_argument("--namespace", default="/pmsm",
+    p.add_argument("--namespace", type=ros_name, default="/pmsm",
                    help="namespace of the pipeline's nodes and topics, inputs and results "
                         "(default /pmsm; one per motor)")
-    p.add_argument("--wait", type=float, default=0.0, metavar="S",
+    p.add_argument("--wait", type=wait_seconds, default=0.0, metavar="S",
                    help="--nodes sim without identifier: wait up to S s for a subscriber "
                         "on the input topics before the first sample (default 0)")
-    p.add_argument("--subscribers", type=int, default=1, metavar="N",
+    p.add_argument("--subscribers", type=count(1, 1000), default=1, metavar="N",
                    help="with --wait: wait for N subscribers on each input topic (default 1; "
                         "2 for an identifier that also records)")
-    p.add_argument("--window", type=int, default=None, help="samples per fit (default 1000)")
-    p.add_argument("--hop", type=int, default=None, help="samples between fits (default 250)")
+    p.add_argument("--window", type=count(2, MAX_WINDOW), default=None,
+                   help="samples per fit (default 1000)")
+    p.add_argument("--hop", type=count(1, MAX_WINDOW), default=None,
+                   help="samples between fits (default 250)")
     p.add_argument("--method", choices=("iofr", "ofr"), default=None,
                    help="term selection of the identifier (default iofr)")
     p.add_argument("--outputs", default=None, help="identified outputs (default speed,position)")

@@ -8,6 +8,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from .common import MAX_AMPLITUDE_N, number, ros_name, seed_type
+
 HELP = "offline: run the motor model faster than real time and write a recording"
 #: Output options, checked before any work starts (see common.check_outputs).
 OUTPUTS = {"json": "file", "out": "bag"}
@@ -46,16 +48,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="thrust signal (default paper-speed: 16.5 Hz; paper-position: 11.5 Hz)")
     p.add_argument("--duration", type=_positive, default=10.0, metavar="S",
                    help="seconds to simulate (default 10 = 5000 samples at 500 Hz)")
-    p.add_argument("--seed", type=int, default=0, metavar="N",
+    p.add_argument("--seed", type=seed_type, default=0, metavar="N",
                    help="seed of the noise and of the random excitations (default 0)")
-    p.add_argument("--amplitude", type=float, default=None, metavar="N",
+    p.add_argument("--amplitude", type=number(0, MAX_AMPLITUDE_N, unit="N"),
+                   default=None, metavar="N",
                    help="peak thrust in newtons (default depends on --excitation)")
     p.add_argument("--excitation-option", type=_option, action="append", default=[],
                    metavar="KEY=VALUE", help="excitation option, e.g. f_max_hz=60 (repeatable)")
     p.add_argument("--out", required=True, metavar="BAG", help="rosbag2 directory to write")
     p.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap",
                    help="rosbag2 storage plugin (default mcap)")
-    p.add_argument("--namespace", default="/pmsm", help="topic namespace (default /pmsm)")
+    p.add_argument("--namespace", type=ros_name, default="/pmsm",
+                   help="topic namespace (default /pmsm)")
     p.add_argument("--force", action="store_true", help="replace an existing bag at --out")
     p.add_argument("--json", metavar="FILE", help="write a summary as JSON ('-' = stdout)")
     p.add_argument("--quiet", action="store_true",

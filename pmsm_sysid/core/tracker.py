@@ -106,6 +106,14 @@ class TrackerConfig:
                 raise DataError(f"{name} must be a number <= 1, got {value}")
         if self.corr_max_lag < 1 or self.window < 4 * self.corr_max_lag:
             raise DataError(f"the correlation tests need window >= 4 x {self.corr_max_lag}")
+        for o in self.outputs:  # refused at start, rather than silently fitting nothing
+            lag = o.fit.structure.max_lag
+            n_params = o.fit.n_terms + (1 if o.fit.dc_removed else 0)
+            if self.window < lag + 2 * n_params:
+                raise DataError(
+                    f"{o.output}: a window of {self.window} samples can never fit maximum lag "
+                    f"{lag} and {n_params} parameters (it needs at least {lag + 2 * n_params}: "
+                    "lag + 2 x parameters); raise window or lower the lags or terms")
 
     @property
     def history(self) -> int:
