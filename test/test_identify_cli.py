@@ -83,7 +83,7 @@ def test_json_to_stdout_keeps_stdout_clean(narx_bag: Path,
     (["--validate", "3000:9000"], "outside the recording"),
     (["--estimate", "0:10", "--no-validate"], "too few"),
     (["--estimate", "0:40", "--no-validate"], "correlation tests need"),
-    (["--terms", "0"], "at least 1"),
+    (["--terms", "0"], "--terms: must be >= 1"),
 ])
 def test_bad_requests_exit_2_with_one_line(narx_bag: Path, argv: list[str], message: str,
                                            capsys: pytest.CaptureFixture[str]) -> None:

@@ -213,7 +213,7 @@ def test_cli_errors_are_one_line(ros_env: int, tmp_path: Path) -> None:
     cases = [
         ([*CLI, "replay", str(tmp_path / "missing")], "no such bag"),
         ([*CLI, "replay", str(REPO / "README.md")], "not a rosbag2"),
-        ([*CLI, "replay", str(tmp_path), "--rate", "-1"], "--rate must be >= 0"),
+        ([*CLI, "replay", str(tmp_path), "--rate", "-1"], "--rate: must be >= 0"),
         ([*CLI, "record", "--out", str(REPO / "README.md")], "exists already"),
         ([*CLI, "record", "--out", str(tmp_path / "x"), "--duration", "0"], "--duration"),
     ]

@@ -96,7 +96,7 @@ def _recorded(bag: Path) -> int:
 
 
 @pytest.mark.parametrize("argv,match", [
-    (["--duration", "-1"], "--duration must be > 0"),
+    (["--duration", "-1"], "--duration: must be > 0"),
     (["--nodes", "sim,motor"], "--nodes"),
     (["--plant", "no/such/plant.yaml"], "plant"),
     (["--rate", "2"], "--rate applies to --clock sim"),
