@@ -17,8 +17,8 @@ setup(
     ],
     python_requires=">=3.10",
     # the whole offline tool and the Python API; no ROS wheels (bags are read with rosbags)
-    install_requires=["numpy", "scipy", "rosbags>=0.10", "PyYAML", "matplotlib", "Jinja2",
-                      "rich"],
+    install_requires=["numpy", "scipy", "rosbags>=0.10", "PyYAML", "jsonschema", "matplotlib",
+                      "Jinja2", "rich"],
     extras_require={
         "test": ["pytest", "pytest-xdist", "pytest-timeout", "hypothesis", "ruff", "mypy",
                  "types-PyYAML", "scipy-stubs", "pdoc", "colcon-core", "colcon-ros",
