@@ -87,7 +87,10 @@ def test_json_to_stdout_keeps_stdout_clean(narx_bag: Path,
 ])
 def test_bad_requests_exit_2_with_one_line(narx_bag: Path, argv: list[str], message: str,
                                            capsys: pytest.CaptureFixture[str]) -> None:
-    rc = main(["identify", str(narx_bag), "--ny", "2", "--nu", "2", *argv])
+    try:
+        rc = main(["identify", str(narx_bag), "--ny", "2", "--nu", "2", *argv])
+    except SystemExit as exc:  # refused while parsing the options
+        rc = exc.code
     err = capsys.readouterr().err.strip()
     assert rc == 2
     assert len(err.splitlines()) == 1 and message in err and "Traceback" not in err

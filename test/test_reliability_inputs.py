@@ -332,12 +332,13 @@ def test_empty_bags_and_bags_without_definitions(tmp_path: Path, storage: str,
 
 
 @pytest.mark.parametrize("argv,fragments", [
-    (["--ny", "100000"], ["samples are too few", "maximum lag 100000"]),
+    (["--ny", "100000"], ["argument --ny: must be at most 10000, got 100000"]),
+    (["--ny", "9000"], ["samples are too few", "maximum lag 9000"]),
     (["--ny", "1000", "--nu", "1000"], ["candidate terms", "exceed the limit of 200000"]),
     (["--ny", "0", "--nu", "0"], ["ny + nu > 0"]),
     (["--delay", "0"], ["delay must be >= 1"]),
     (["--degree", "4"], ["invalid choice: 4"]),
-    ([*SMALL, "--corr-lags", "0"], ["corr_lags must be at least 1"]),
+    ([*SMALL, "--corr-lags", "0"], ["argument --corr-lags: must be >= 1, got 0"]),
     (["--estimate", "4000:6000"], ["estimation range 4000:6000 is outside the recording "
                                    "(0:5000)"]),
     ([*SMALL, "--validate", "4900:5001"], ["validation range 4900:5001 is outside"]),

@@ -23,13 +23,9 @@ def _model_json(model: ModelLike) -> tuple[dict[str, Any], str]:
         # through JSON text, exactly as the CLI reads the file identify wrote
         return json.loads(json.dumps(model.to_dict(), allow_nan=False)), "model"
     if isinstance(model, (str, os.PathLike)):
-        path = Path(model)
-        try:
-            d: Any = json.loads(path.read_text())
-        except FileNotFoundError as exc:
-            raise DataError(f"{path}: no such file") from exc
-        except (OSError, ValueError) as exc:
-            raise DataError(f"{path}: not readable JSON ({exc})") from exc
+        from ..validate import read_json_object
+
+        d: Any = read_json_object(str(Path(model)), "a model JSON written by identify")
         label = str(model)
     elif isinstance(model, Mapping):
         d, label = dict(model), "model"

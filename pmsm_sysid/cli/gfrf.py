@@ -75,14 +75,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _stdin_json() -> Any:
-    import json
+    from ..validate import read_json_object
 
-    from ..core.errors import DataError
-
-    try:
-        return json.loads(sys.stdin.read())
-    except ValueError as exc:
-        raise DataError(f"stdin: not readable JSON ({exc})") from exc
+    return read_json_object("-", "a model JSON written by identify", stdin_text=sys.stdin.read())
 
 
 def _num(x: float | None, width: int, fmt: str = ".2f") -> str:

@@ -250,13 +250,10 @@ def kind_of(d: Any) -> str:
 
 def report_json(path: str | Path, out_dir: str | Path) -> ReportResult:
     """Report a result JSON (kind detected from its keys)."""
+    from ..validate import read_json_object
+
     p = Path(path)
-    try:
-        d = json.loads(p.read_text())
-    except FileNotFoundError as exc:
-        raise DataError(f"{p}: no such file") from exc
-    except (OSError, ValueError) as exc:
-        raise DataError(f"{p}: not readable JSON ({exc})") from exc
+    d = read_json_object(str(p), "a result JSON of identify, gfrf, diagnose or run --json")
     try:
         kind = kind_of(d)
     except DataError as exc:
