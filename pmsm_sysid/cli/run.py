@@ -22,7 +22,7 @@ MAX_WINDOW = 100_000
 
 HELP = "run the sim motor, identifier and GFRF nodes in one process (live pipeline)"
 #: Output options, checked before any work starts (see common.check_outputs).
-OUTPUTS = {"json": "file", "record": "bag"}
+OUTPUTS = {"json": "file", "record": "bag", "report": "report"}
 
 EPILOG = """\
 examples:
@@ -197,7 +197,25 @@ def run(args: argparse.Namespace) -> int:
     out = sys.stderr if args.json == "-" else sys.stdout
     print(f"pmsm-sysid run: {_headline(summary)}", file=out)
     if args.report:
-        from ..report.build import report_summary
-
-        print(f"pmsm-sysid run: report {report_summary(summary, args.report).index}", file=out)
+        print(f"pmsm-sysid run: report {_report(summary, args)}", file=out)
     return 0
+
+
+def _report(summary: dict[str, Any], args: argparse.Namespace) -> Path:
+    """Write the run's report (complete, or none at all); if that fails and no --json kept
+    the summary, the summary is saved in the temporary directory and the error says where."""
+    from ..core.errors import PmsmSysidError
+    from ..report.build import report_summary
+    from ..validate import atomic_dir, rescue_path
+    from .common import write_json
+
+    try:
+        with atomic_dir(args.report, "--report") as tmp:
+            index = Path(report_summary(summary, tmp).index)
+        return Path(args.report) / index.relative_to(tmp)
+    except PmsmSysidError as exc:
+        if args.json not in (None, "-"):
+            raise
+        spare = rescue_path("pmsm-sysid-run")
+        write_json(summary, str(spare))
+        raise type(exc)(f"{exc}; the run summary was saved to {spare}") from exc
