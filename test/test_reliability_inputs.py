@@ -80,10 +80,10 @@ def test_nonfinite_samples_are_dropped_counted_and_never_fitted_across(
     position = np.cumsum(y) / FS
     u[1200], y[1500] = np.nan, np.inf
     bag = bag_of(tmp_path / "nan", u, y, position=position)
-    # the two samples are dropped on reading; a window over them would pair wrong lags
+    # the two samples are dropped on reading; a window over them is refused, naming them
     assert_one_line_error(run_cli("identify", str(bag), *SMALL),
-                          "estimation range 1000:2000", "not evenly sampled",
-                          "after sample 1199")
+                          "estimation range 1000:2000", "non-finite thrust sample (nan)",
+                          "at t = 2.4 s, message 1200 on /pmsm/thrust and 1 more")
     d, printed = identify_json(bag, tmp_path, "--estimate", "1600:2600", "--validate",
                                "3000:4000", capsys=capsys)
     _assert_true_model(d)

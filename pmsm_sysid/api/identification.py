@@ -120,9 +120,13 @@ def identify(data: DataLike, *, output: str = "speed", input: str = "thrust",
     if isinstance(data, Recording):
         rec = data
     elif isinstance(data, (str, os.PathLike)):
+        from ..bagio.read import check_ranges_finite
         from .recordings import load_bag
 
-        loaded = load_bag(data, namespace)
+        ranges = {"estimation": est, **({"validation": val} if val is not None else {})}
+        # read only as far as the ranges need: a short window of a long recording stays cheap
+        loaded = load_bag(data, namespace, until_sample=max(r[1] for r in ranges.values()))
+        check_ranges_finite(loaded, ranges, config.structure.max_lag)
         rec, alignment = loaded.recording, loaded.report
         source = str(Path(data).resolve())
     else:

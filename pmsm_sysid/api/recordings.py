@@ -17,13 +17,16 @@ PathLike = str | os.PathLike[str]
 STORAGES = ("mcap", "sqlite3")
 
 
-def load_bag(path: PathLike, namespace: str | None = None) -> LoadedRecording:
-    """The recording of a bag together with how its streams were aligned (for the CLI)."""
+def load_bag(path: PathLike, namespace: str | None = None,
+             until_sample: int | None = None) -> LoadedRecording:
+    """The recording of a bag together with how its streams were aligned (for the CLI);
+    ``until_sample``: only the samples before it are needed (reading may stop after them)."""
     from ..bagio import read_recording
+    from ..validate import check_namespace
 
-    if namespace is not None and not isinstance(namespace, str):
-        raise OptionError(f"namespace must be a string such as '/pmsm', got {namespace!r}")
-    return read_recording(Path(path), namespace=namespace)
+    if namespace is not None:
+        check_namespace(namespace, "namespace")
+    return read_recording(Path(path), namespace=namespace, until_sample=until_sample)
 
 
 def read_bag(path: PathLike, namespace: str | None = None) -> Recording:

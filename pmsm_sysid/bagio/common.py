@@ -56,6 +56,16 @@ class LoadedRecording:
     recording: Recording
     report: AlignReport
     topics: dict[str, str]
+    #: Non-finite samples dropped on reading: (signal, topic, stamp in s, message index, value),
+    #: the first :data:`MAX_NONFINITE_LISTED` of them.
+    nonfinite: tuple[tuple[str, str, float, int, float], ...] = ()
+    #: False when reading stopped early because the samples asked for were read
+    #: (``read_recording(until_sample=...)``): the counts then cover the part read.
+    complete: bool = True
+
+
+#: How many non-finite samples a loaded recording lists by position.
+MAX_NONFINITE_LISTED = 100
 
 
 # --------------------------------------------------------------------------- typestore
@@ -149,6 +159,12 @@ def _precheck(path: Path) -> None:
         raise BagError(f"{path}: permission denied")
     if is_file and path.suffix not in (".mcap", ".db3"):
         raise BagError(f"{path}: not a rosbag2 directory or .mcap/.db3 file")
+    stores = ([p for p in path.iterdir() if p.suffix in (".mcap", ".db3")] if is_dir
+              else [path] if is_file else [])
+    empty = sorted(p.name for p in stores if p.is_file() and p.stat().st_size == 0)
+    if empty:
+        raise BagError(f"{path}: storage file {', '.join(empty)} is empty (0 bytes): the "
+                       "recording holds no messages (was it killed before its first write?)")
 
 
 def _explain(path: Path, exc: Exception) -> str:

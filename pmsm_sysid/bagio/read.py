@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from array import array
 from collections.abc import Callable, Collection, Iterator
 from dataclasses import replace
 from pathlib import Path
@@ -13,11 +14,22 @@ from .. import topics as tp
 from ..core.align import align_streams, robust_period
 from ..core.errors import BagError, DataError
 from .cdr import decode_stamped
-from .common import LoadedRecording, RawMessage, open_reader, typestore
+from .common import MAX_NONFINITE_LISTED, LoadedRecording, RawMessage, open_reader, typestore
 
 SIGNALS = (tp.THRUST, tp.SPEED, tp.POSITION)
-# (stamps in ns, values) of one stream while reading
-_Stream = tuple[list[int], list[float]]
+# (stamps in ns, values) of one stream while reading: 16 bytes a message, not ~70 in lists
+_Stream = tuple["array[int]", "array[float]"]
+#: Messages read per stream beyond the last sample asked for (reordered or late messages).
+READ_MARGIN = 1000
+
+
+def _stream() -> _Stream:
+    return array("q"), array("d")
+
+
+def _enough(streams: dict[str, _Stream], until: int | None) -> bool:
+    """Every stream holds ``until`` + margin messages: the samples asked for are all read."""
+    return until is not None and all(len(s[0]) >= until + READ_MARGIN for s in streams.values())
 
 
 def bag_topics(path: str | Path) -> dict[str, str]:
@@ -77,14 +89,14 @@ def _choose_layout(path: Path, found: dict[str, str], namespace: str | None) -> 
     if len(prefixes) == 1:
         return _triple(path, found, prefixes[0] or "/")
     if len(prefixes) > 1:
-        raise BagError(f"{path}: several input namespaces ({', '.join(prefixes)}); choose one "
-                       "with --namespace")
+        raise BagError(f"{path}: several input namespaces ({', '.join(prefixes)}); say which "
+                       f"to read, e.g. --namespace {prefixes[0] or '/'} (API: namespace=)")
     joints = sorted(t for t, m in found.items() if m == tp.JOINT_STATE_TYPE)
     if len(joints) == 1:
         return {"joint_state": joints[0]}
     if len(joints) > 1:
-        raise BagError(f"{path}: several JointState topics ({', '.join(joints)}); choose one "
-                       "with --namespace")
+        raise BagError(f"{path}: several JointState topics ({', '.join(joints)}); say which "
+                       f"to read, e.g. --namespace {joints[0]} (API: namespace=)")
     raise BagError(f"{path}: no <ns>/thrust + <ns>/position topics and no JointState topic "
                    f"(topics: {_listing(found)})")
 
@@ -100,10 +112,10 @@ _VALUE: dict[str, Callable[[Any], float]] = {
 }
 
 
-def _read_triple(reader: Any, chosen: dict[str, str]) -> dict[str, _Stream]:
+def _read_triple(reader: Any, chosen: dict[str, str], until: int | None) -> dict[str, _Stream]:
     store = typestore()
     by_topic = {topic: signal for signal, topic in chosen.items()}
-    streams: dict[str, _Stream] = {s: ([], []) for s in chosen}
+    streams: dict[str, _Stream] = {s: _stream() for s in chosen}
     conns = [c for c in reader.connections if c.topic in by_topic]
     # the fast path only for the stock definitions (same type hash as ROS 2 Jazzy, or none)
     fast = {c.id for c in conns if c.digest in ("", store.hash_rihs01(c.msgtype))}
@@ -115,6 +127,8 @@ def _read_triple(reader: Any, chosen: dict[str, str]) -> dict[str, _Stream]:
             got = _stamp_ns(msg), _VALUE[conn.msgtype](msg)
         stamps.append(got[0])
         values.append(got[1])
+        if len(stamps) % 256 == 0 and _enough(streams, until):
+            break
     return streams
 
 
@@ -125,10 +139,11 @@ def _joint_index(names: list[str], joint_name: str | None, seen: set[str]) -> in
     return names.index(joint_name) if joint_name in names else None
 
 
-def _read_joint(path: Path, reader: Any, topic: str, joint_name: str | None) -> dict[str, _Stream]:
+def _read_joint(path: Path, reader: Any, topic: str, joint_name: str | None,
+                until: int | None) -> dict[str, _Stream]:
     """JointState layout: effort = thrust, velocity = speed, position = position."""
     store = typestore()
-    streams: dict[str, _Stream] = {s: ([], []) for s in SIGNALS}
+    streams: dict[str, _Stream] = {s: _stream() for s in SIGNALS}
     fields = {tp.THRUST: "effort", tp.SPEED: "velocity", tp.POSITION: "position"}
     seen: set[str] = set()
     conns = [c for c in reader.connections if c.topic == topic]
@@ -143,9 +158,12 @@ def _read_joint(path: Path, reader: Any, topic: str, joint_name: str | None) -> 
             if len(arr) > k:
                 streams[signal][0].append(stamp)
                 streams[signal][1].append(float(arr[k]))
+        if _enough({s: streams[s] for s in (tp.THRUST, tp.POSITION)}, until):
+            break
     if joint_name is None and len(seen) > 1:
-        raise BagError(f"{path}: {topic} carries joints {', '.join(sorted(seen))}; "
-                       "choose one with --joint")
+        raise BagError(f"{path}: {topic} carries joints {', '.join(sorted(seen))}; reading "
+                       "one joint of several is possible from Python only: "
+                       "read_recording(..., joint_name=...)")
     if not streams[tp.POSITION][0]:
         what = f"joint '{joint_name}'" if joint_name else "a single joint"
         names = ", ".join(sorted(seen)) or "none"
@@ -155,8 +173,22 @@ def _read_joint(path: Path, reader: Any, topic: str, joint_name: str | None) -> 
     return streams
 
 
-def _seconds(stream: _Stream) -> tuple[np.ndarray[Any, np.dtype[np.float64]], list[float]]:
-    return np.asarray(stream[0], dtype=np.int64) / 1e9, stream[1]
+def _seconds(stream: _Stream) -> tuple[np.ndarray[Any, np.dtype[np.float64]],
+                                        np.ndarray[Any, np.dtype[np.float64]]]:
+    return (np.frombuffer(stream[0], dtype=np.int64) / 1e9,
+            np.frombuffer(stream[1], dtype=np.float64))
+
+
+def _nonfinite(streams: dict[str, _Stream], topics: dict[str, str],
+               ) -> tuple[tuple[str, str, float, int, float], ...]:
+    """Where the non-finite samples are (signal, topic, stamp s, message index, value)."""
+    out: list[tuple[str, str, float, int, float]] = []
+    for signal, (stamps, values) in streams.items():
+        v = np.frombuffer(values, dtype=np.float64)
+        for i in np.flatnonzero(~np.isfinite(v))[:MAX_NONFINITE_LISTED]:
+            out.append((signal, topics.get(signal, signal), stamps[int(i)] / 1e9, int(i),
+                        float(v[i])))
+    return tuple(sorted(out, key=lambda x: x[2])[:MAX_NONFINITE_LISTED])
 
 
 def read_recording(
@@ -165,28 +197,37 @@ def read_recording(
     namespace: str | None = None,
     tolerance_s: float | None = None,
     joint_name: str | None = None,
+    until_sample: int | None = None,
 ) -> LoadedRecording:
     """Read and align the input signals of a bag (``header.stamp``, not receive time).
 
     ``namespace`` None auto-detects the ``<ns>/thrust`` + ``<ns>/position`` (+ ``<ns>/speed``)
     topics, or a single ``sensor_msgs/JointState`` topic (``namespace`` may also name that
     topic). Speed absent -> derived from position and marked. See :func:`align_streams`.
+
+    ``until_sample``: the caller needs samples before this index only; reading stops
+    :data:`READ_MARGIN` messages per stream after it, so a short window early in a long
+    recording costs what the window costs, not what the recording does (``complete`` is
+    then False and the alignment counts cover the part read).
     """
     path = Path(path)
     with open_reader(path) as reader:
         found = {c.topic: c.msgtype for c in reader.connections}
         layout = _choose_layout(path, found, namespace)
         if "joint_state" in layout:
-            streams = _read_joint(path, reader, layout["joint_state"], joint_name)
+            streams = _read_joint(path, reader, layout["joint_state"], joint_name, until_sample)
             used = {layout["joint_state"]: tp.JOINT_STATE_TYPE}
         else:
-            streams = _read_triple(reader, layout)
+            streams = _read_triple(reader, layout, until_sample)
             used = {topic: found[topic] for topic in layout.values()}
             empty = [layout[s] for s in (tp.THRUST, tp.POSITION) if not streams[s][0]]
             if empty:
                 raise BagError(f"{path}: no messages on {' and '.join(empty)} (empty recording)")
         custom = getattr(reader.storage.metadata, "custom", None) or {}
-    speed = _seconds(streams[tp.SPEED]) if streams.get(tp.SPEED, ([], []))[0] else None
+    complete = not _enough(streams, until_sample)
+    topics = {s: layout.get(s, layout.get("joint_state", s)) for s in SIGNALS}
+    nonfinite = _nonfinite(streams, topics)
+    speed = _seconds(streams[tp.SPEED]) if tp.SPEED in streams and streams[tp.SPEED][0] else None
     try:
         rec, report = align_streams(_seconds(streams[tp.THRUST]), speed,
                                     _seconds(streams[tp.POSITION]), tolerance_s=tolerance_s,
@@ -202,4 +243,28 @@ def read_recording(
     meta = {k: str(v) for k, v in custom.items()}
     meta.update({"bag": str(path), "input_topics": ",".join(sorted(used))})
     rec = replace(rec, meta=meta, sample_rate_hz=rate)
-    return LoadedRecording(recording=rec, report=report, topics=found)
+    return LoadedRecording(recording=rec, report=report, topics=found, nonfinite=nonfinite,
+                           complete=complete)
+
+
+def check_ranges_finite(loaded: LoadedRecording, ranges: dict[str, tuple[int, int]],
+                        lag: int) -> None:
+    """Refuse a range (with its ``lag`` samples before it) over a non-finite sample, naming
+    the sample: its signal, value, stamp and message on its topic."""
+    t = loaded.recording.t
+    if not loaded.nonfinite or len(t) == 0:
+        return
+    half = 0.5 / loaded.recording.sample_rate_hz
+    for label, (start, stop) in ranges.items():
+        lo, hi = max(0, start - lag), min(stop, len(t)) - 1
+        if lo > hi:
+            continue  # outside the recording: said by the fit's own checks
+        inside = [x for x in loaded.nonfinite if t[lo] - half <= x[2] <= t[hi] + half]
+        if inside:
+            signal, topic, stamp, index, value = inside[0]
+            more = f" and {len(inside) - 1} more" if len(inside) > 1 else ""
+            raise DataError(
+                f"{label} range {start}:{stop} (lags from sample {lo}, t = {t[lo]:.3f} to "
+                f"{t[hi]:.3f} s) holds a non-finite {signal} sample ({value}) at t = "
+                f"{stamp:.6g} s, message {index} on {topic}{more}; non-finite samples are "
+                "dropped on reading and cannot be fitted: choose a range without it")

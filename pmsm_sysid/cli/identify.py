@@ -13,7 +13,7 @@ import argparse
 import sys
 from typing import Any
 
-from .common import count, parse_fraction, parse_range, write_json
+from .common import count, parse_fraction, parse_range, ros_name, write_json
 
 HELP = "offline NARX identification by OFR on one recording"
 #: Output options, checked before any work starts (see common.check_outputs).
@@ -80,6 +80,9 @@ def model_options(args: argparse.Namespace) -> dict[str, Any]:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("bag", metavar="BAG", help="rosbag2 recording (directory)")
+    p.add_argument("--namespace", type=ros_name, default=None,
+                   help="input namespace (e.g. /pmsm) or JointState topic, for a bag that "
+                        "holds several (default: found by itself)")
     add_model_options(p)
     p.add_argument("--json", metavar="FILE", help="write the result as JSON ('-' = stdout)")
     p.add_argument("--quiet", action="store_true",
@@ -134,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
     from ..progress import activity
 
     with activity("identify"):
-        fit = identify(args.bag, **model_options(args))
+        fit = identify(args.bag, namespace=args.namespace, **model_options(args))
     d = fit.to_dict()
     out = sys.stderr if args.json == "-" else sys.stdout
     _alignment_note(fit.alignment, out)
