@@ -59,6 +59,8 @@ def load_mat(path: str | Path) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key in ("t", "qm", "vir", "qg", "gtau", "kp", "kv"):
         if key in raw:
+            if np.iscomplexobj(raw[key]):  # never take the real part silently
+                raise DataError(f"{path}: '{key}' holds complex numbers; a recording is real")
             try:
                 out[key] = np.asarray(raw[key], dtype=np.float64)
             except (TypeError, ValueError) as exc:

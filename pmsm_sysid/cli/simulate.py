@@ -17,16 +17,6 @@ OUTPUTS = {"json": "file", "out": "bag"}
 EXCITATIONS = ("paper-speed", "paper-position", "multisine", "chirp", "prbs", "aprbs")
 
 
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from exc
-    if not value > 0 or value == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'")
-    return value
-
-
 def _option(text: str) -> tuple[str, Any]:
     key, sep, raw = text.partition("=")
     if not sep or not key:
@@ -46,7 +36,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="plant file (default: the nominal motor of the paper's Table 1)")
     p.add_argument("--excitation", choices=EXCITATIONS, default="paper-speed",
                    help="thrust signal (default paper-speed: 16.5 Hz; paper-position: 11.5 Hz)")
-    p.add_argument("--duration", type=_positive, default=10.0, metavar="S",
+    p.add_argument("--duration", type=number(0, None, low_open=True, unit="s"),
+                   default=10.0, metavar="S",
                    help="seconds to simulate (default 10 = 5000 samples at 500 Hz)")
     p.add_argument("--seed", type=seed_type, default=0, metavar="N",
                    help="seed of the noise and of the random excitations (default 0)")
