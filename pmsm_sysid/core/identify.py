@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from .candidates import candidate_set
 from .datacheck import DataCheck, check_sampling, describe_fit_data, validate_fit_data
-from .errors import IdentificationError
+from .errors import DataError, IdentificationError
 from .iofr import iofr
 from .model import NarxModel, Structure
 from .ofr import CRITERIA, OfrResult, frols, information_criterion, least_squares
@@ -305,6 +305,18 @@ def _excitation(u: FloatArray, fs: float) -> dict[str, Any] | None:
     return out
 
 
+def _check_validation_data(y: FloatArray, u: FloatArray, output: str, input: str,
+                           rng: tuple[int, int], degree: int) -> None:
+    """The validation window gets the estimation window's magnitude check: predicting with
+    signals of 1e154 overflows as surely as fitting them."""
+    from .datacheck import _magnitude
+
+    try:
+        _magnitude({output: y, input: u}, degree)
+    except DataError as exc:
+        raise DataError(f"validation range {rng[0]}:{rng[1]}: {exc}") from exc
+
+
 def identify_recording(
     rec: Any,
     *,
@@ -338,6 +350,7 @@ def identify_recording(
     yv = uv = None
     if validate is not None:
         yv, uv = _extended(rec, output, validate, lag), _extended(rec, input, validate, lag)
+        _check_validation_data(yv, uv, output, input, validate, cfg.structure.degree)
     report = validate_narx(fit.model, y_e, u_e, yv, uv, max_lag=max_lag_corr)
     t2 = time.perf_counter()
     excitation = _excitation(u_e[min(lag, estimate[0]) :], fs)
