@@ -256,9 +256,9 @@ def check_ranges_finite(loaded: LoadedRecording, ranges: dict[str, tuple[int, in
         return
     half = 0.5 / loaded.recording.sample_rate_hz
     for label, (start, stop) in ranges.items():
-        lo, hi = max(0, start - lag), min(stop, len(t)) - 1
-        if lo > hi:
+        if stop > len(t):
             continue  # outside the recording: said by the fit's own checks
+        lo, hi = max(0, start - lag), stop - 1
         inside = [x for x in loaded.nonfinite if t[lo] - half <= x[2] <= t[hi] + half]
         if inside:
             signal, topic, stamp, index, value = inside[0]
