@@ -73,19 +73,19 @@ def write_bag(recording: Recording, path: PathLike, *, namespace: str = "/pmsm",
     """
     from ..bagio import write_recording
     from ..core.errors import BagError
+    from ..validate import atomic_dir, check_namespace, check_output_dir, is_bag_dir
 
     if not isinstance(recording, Recording):
         raise OptionError(f"write_bag needs a Recording, got {type(recording).__name__}")
     if storage not in STORAGES:
         raise OptionError(f"storage must be one of {', '.join(STORAGES)}, got {storage!r}")
+    check_namespace(namespace, "namespace")
     out = Path(path)
-    if out.exists():
-        if not overwrite:
-            raise BagError(f"{out} exists already; pass overwrite=True to replace it")
-        if not out.is_dir() or not (out / "metadata.yaml").is_file():
-            raise BagError(f"{out} exists and is not a rosbag2 directory; not replacing it")
-        import shutil
-
-        shutil.rmtree(out)
-    write_recording(out, recording, namespace=namespace, storage=storage)
+    if out.exists() and not overwrite:
+        raise BagError(f"{out} exists already; pass overwrite=True to replace it")
+    # the checks every output gets (missing directory, not a bag, cannot be written), then
+    # built beside it and renamed: the bag is complete, or not there at all
+    check_output_dir(out, "path", force=True, is_ours=is_bag_dir, what="rosbag2 directory")
+    with atomic_dir(out, "path") as tmp:
+        write_recording(tmp, recording, namespace=namespace, storage=storage)
     return out
