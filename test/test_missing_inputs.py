@@ -49,4 +49,4 @@ def test_a_replay_nobody_listens_to_says_so(ros_env: int, tmp_path: Path) -> Non
     assert "to no subscriber" in proc.stderr  # the per-topic account (stdout is the JSON)
     bad = subprocess.run([*CLI, "replay", str(bag), "--subscribers", "0"],
                          env=_env(ros_env, tmp_path), capture_output=True, text=True, timeout=60)
-    assert bad.returncode == 2 and "--subscribers must be >= 1" in bad.stderr
+    assert bad.returncode == 2 and "--subscribers: must be >= 1" in bad.stderr

@@ -26,6 +26,7 @@ class _Parser(argparse.ArgumentParser):
     """ArgumentParser whose usage errors are one line on stderr and exit 2."""
 
     def error(self, message: str) -> NoReturn:
+        message = " ".join(message.splitlines())  # one line, whatever the user typed
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
@@ -116,7 +117,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_outputs(args, args._outputs)  # before any work: a long run must not end unwritten
         return int(args._run(args))
     except PmsmSysidError as exc:
-        print(f"pmsm-sysid {args.verb}: error: {exc}", file=sys.stderr)
+        text = " ".join(str(exc).splitlines())  # one line, whatever the input held
+        print(f"pmsm-sysid {args.verb}: error: {text}", file=sys.stderr)
         return 2
     except ModuleNotFoundError as exc:
         if (exc.name or "").split(".")[0] not in ROS_MODULES:
