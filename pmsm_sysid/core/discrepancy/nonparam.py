@@ -67,7 +67,7 @@ class AxisModel:
         if self.axis == "time":
             amp = float(np.hypot(*self.coef))
             return {"model": "sinusoid over time", "frequency_hz": self.freq_hz,
-                    "amplitude_n": amp, "region": [0.0, math.inf], "unit": "s"}
+                    "amplitude_n": amp, "period_s": 1.0 / max(self.freq_hz, 1e-12), "unit": "s"}
         grid = np.linspace(self.lo, self.hi, 201)
         g = _basis(grid, self.lo, self.hi) @ self.coef
         rel = g - float(np.median(g))
