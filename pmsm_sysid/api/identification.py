@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..core.errors import OptionError
-from ..core.identify import FitConfig, IdentifyResult
+from ..core.identify import FORMS, FitConfig, IdentifyResult
 from ..core.model import NarxModel, Structure
 from ..core.ofr import CRITERIA
 from ..core.signals import Recording
@@ -79,7 +79,7 @@ def identify(data: DataLike, *, output: str = "speed", input: str = "thrust",
              validate: tuple[int, int] | None = (3000, 4000),
              criterion: str = "terms", rho: float = 1e-3, method: str = "iofr",
              constant: bool = True, keep_dc: bool = False, corr_lags: int = 20,
-             namespace: str | None = None) -> Identification:
+             namespace: str | None = None, form: str = "level") -> Identification:
     """Identify a polynomial NARX model of ``output`` driven by thrust, by orthogonal forward
     regression (error reduction ratio), and validate it.
 
@@ -91,8 +91,9 @@ def identify(data: DataLike, *, output: str = "speed", input: str = "thrust",
     tolerance for ``criterion="err"``), ``method`` (``iofr``: forward regression refined
     by term exchange; ``ofr``: classic forward regression), ``constant=False`` (no constant
     candidate), ``keep_dc`` (ERR on the raw output), ``corr_lags`` (lags of the correlation
-    tests). Defaults reproduce the speed case of Liu et al.; ``output="position", ny=10,
-    nu=10`` their position case.
+    tests), ``form`` (``level``: the output as measured; ``difference``: its increment per
+    sample, the bounded form of an integrating output such as position). Defaults reproduce
+    the speed case of Liu et al.; ``output="position", ny=10, nu=10`` their position case.
 
     Every option is checked before any work starts; a bad one raises a
     :class:`PmsmSysidError` saying which.
@@ -110,6 +111,7 @@ def identify(data: DataLike, *, output: str = "speed", input: str = "thrust",
 
     _checks.choice("output", output, OUTPUTS)
     _checks.choice("input", input, ("thrust",))
+    _checks.choice("form", form, FORMS)
     config = fit_config(ny=ny, nu=nu, degree=degree, terms=terms, delay=delay,
                         criterion=criterion, rho=rho, method=method, constant=constant,
                         keep_dc=keep_dc)
@@ -132,5 +134,5 @@ def identify(data: DataLike, *, output: str = "speed", input: str = "thrust",
     else:
         raise OptionError(f"data must be a Recording or a bag path, got {type(data).__name__}")
     result = identify_recording(rec, input=input, output=output, config=config, estimate=est,
-                                validate=val, max_lag_corr=lags)
+                                validate=val, max_lag_corr=lags, form=form)
     return Identification(result, source, alignment)

@@ -30,6 +30,11 @@ def add_model_options(p: Any) -> None:
     p.add_argument("--input", default="thrust", choices=("thrust",), help="input signal")
     p.add_argument("--output", default="speed", choices=("speed", "position"),
                    help="output signal (default speed)")
+    p.add_argument("--form", choices=("level", "difference"), default="level",
+                   help="model the output as measured (level, the paper's protocol) or as its "
+                        "increment per sample y(k)-y(k-1) (difference: the bounded form of an "
+                        "integrating output such as position; the live identifier's default "
+                        "for position)")
     p.add_argument("--ny", type=count(0, MAX_LAG), default=30,
                    help="output lags y(k-1..k-ny) (default 30)")
     p.add_argument("--nu", type=count(0, MAX_LAG), default=40,
@@ -75,7 +80,7 @@ def model_options(args: argparse.Namespace) -> dict[str, Any]:
             "estimate": args.estimate, "validate": None if args.no_validate else args.validate,
             "criterion": args.criterion, "rho": args.rho, "method": args.method,
             "constant": not args.no_constant, "keep_dc": args.keep_dc,
-            "corr_lags": args.corr_lags}
+            "corr_lags": args.corr_lags, "form": args.form}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

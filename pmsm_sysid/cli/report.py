@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     options = ReportOptions(input=args.input, output=args.output, config=fit_config(args),
                             estimate=args.estimate,
                             validate=None if args.no_validate else args.validate,
-                            corr_lags=args.corr_lags)
+                            corr_lags=args.corr_lags, form=args.form)
     with atomic_dir(args.out, "--out") as tmp:  # a complete report, or none at all
         result = build_report(args.source, tmp, options)
     result = moved(result, tmp, Path(args.out))

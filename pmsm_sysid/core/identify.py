@@ -246,6 +246,7 @@ class IdentifyResult:
     excitation: dict[str, Any] | None
     timing_ms: dict[str, float]
     speed_derived: bool = False  # the speed signal was derived from position
+    form: str = "level"
 
     @property
     def model(self) -> NarxModel:
@@ -257,6 +258,7 @@ class IdentifyResult:
         return {
             "input": self.input, "output": self.output, "sample_rate_hz": self.sample_rate_hz,
             "speed_derived": self.speed_derived and "speed" in (self.input, self.output),
+            "form": self.form,
             "structure": {"ny": st.ny, "nu": st.nu, "degree": st.degree, "delay": st.delay,
                           "constant": st.constant, "n_candidates": self.fit.n_candidates},
             "method": self.fit.method, "criterion": self.fit.criterion,
@@ -273,9 +275,33 @@ class IdentifyResult:
         }
 
 
+#: How an output enters the model: as measured, or as its increment per sample.
+FORMS = ("level", "difference")
+
+
+def output_increments(x: FloatArray, before: float | None) -> FloatArray:
+    """y(k) - y(k-1) of ``x`` (``before`` = the sample before ``x[0]``; None drops x[0])."""
+    x = np.asarray(x, dtype=np.float64)
+    return np.diff(x) if before is None else np.diff(x, prepend=before)
+
+
 def _extended(rec: Any, name: str, rng: tuple[int, int], lag: int) -> FloatArray:
     """Samples rng[0]-lag .. rng[1]-1 of a signal (fewer before if the recording starts)."""
     return np.asarray(rec.signal(name)[max(rng[0] - lag, 0) : rng[1]], dtype=np.float64)
+
+
+def _window_pair(rec: Any, input: str, output: str, rng: tuple[int, int], lag: int,
+                 form: str) -> tuple[FloatArray, FloatArray]:
+    """Output and input of a window with the lag samples before it; with ``form``
+    'difference' the output is its increment per sample (the increment of the recording's
+    first sample does not exist: there the window starts one sample later)."""
+    y, u = _extended(rec, output, rng, lag), _extended(rec, input, rng, lag)
+    if form == "level":
+        return y, u
+    first = max(rng[0] - lag, 0)
+    before = None if first == 0 else float(rec.signal(output)[first - 1])
+    dy = output_increments(y, before)
+    return dy, u[len(u) - len(dy):]
 
 
 def _check_range(label: str, rng: tuple[int, int], n: int) -> None:
@@ -326,9 +352,13 @@ def identify_recording(
     estimate: tuple[int, int] = (1000, 2000),
     validate: tuple[int, int] | None = (3000, 4000),
     max_lag_corr: int = 20,
+    form: str = "level",
 ) -> IdentifyResult:
     """The paper's protocol on a :class:`~.signals.Recording`: fit on ``estimate``, check the
     model predicted output on ``validate`` (0-based half-open ranges).
+
+    ``form`` 'difference' models the output's increment per sample, y(k) - y(k-1): the
+    bounded form of an integrating output (position), whose free run cannot drift away.
 
     Every sample of each window is a predicted sample: the L samples before a window (L =
     max lag) feed the lags when the recording has them (otherwise the window's own first L).
@@ -336,6 +366,10 @@ def identify_recording(
     t0 = time.perf_counter()
     cfg = config or FitConfig()
     n = len(rec)
+    if form not in FORMS:
+        from .errors import DataError
+
+        raise DataError(f"form must be one of {', '.join(FORMS)}, got '{form}'")
     _check_range("estimation", estimate, n)
     if validate is not None:
         _check_range("validation", validate, n)
@@ -343,13 +377,13 @@ def identify_recording(
     _check_grid(rec, "estimation", estimate, lag)
     if validate is not None:
         _check_grid(rec, "validation", validate, lag)
-    y_e, u_e = _extended(rec, output, estimate, lag), _extended(rec, input, estimate, lag)
+    y_e, u_e = _window_pair(rec, input, output, estimate, lag, form)
     fs = float(rec.sample_rate_hz)
     fit = fit_narx(y_e, u_e, cfg, fs, input_name=input, output_name=output)
     t1 = time.perf_counter()
     yv = uv = None
     if validate is not None:
-        yv, uv = _extended(rec, output, validate, lag), _extended(rec, input, validate, lag)
+        yv, uv = _window_pair(rec, input, output, validate, lag, form)
         _check_validation_data(yv, uv, output, input, validate, cfg.structure.degree)
     report = validate_narx(fit.model, y_e, u_e, yv, uv, max_lag=max_lag_corr)
     t2 = time.perf_counter()
@@ -359,4 +393,4 @@ def identify_recording(
     return IdentifyResult(input=input, output=output, sample_rate_hz=fs, fit=fit,
                           validation=report, estimate=estimate, validate=validate,
                           excitation=excitation, timing_ms=timing,
-                          speed_derived=bool(getattr(rec, "speed_derived", False)))
+                          speed_derived=bool(getattr(rec, "speed_derived", False)), form=form)

@@ -44,6 +44,7 @@ class ReportOptions:
     estimate: tuple[int, int] = (1000, 2000)
     validate: tuple[int, int] | None = (3000, 4000)
     corr_lags: int = 20
+    form: str = "level"
 
 
 @dataclass(frozen=True)
@@ -103,7 +104,7 @@ def report_bag(bag: str | Path, out_dir: str | Path,
         sink.tick()
         res = identify_recording(rec, input=opt.input, output=opt.output, config=opt.config,
                                  estimate=opt.estimate, validate=opt.validate,
-                                 max_lag_corr=opt.corr_lags)
+                                 max_lag_corr=opt.corr_lags, form=opt.form)
         sink.tick()
         d = res.to_dict()
         d["source"] = str(Path(bag).resolve())
