@@ -21,8 +21,14 @@ samples before a feeding the lags, exactly as ``identify --estimate a:b`` does):
    previous fitted one (when fits cannot keep up and windows are skipped, detection pauses:
    the stream of models it is calibrated on has holes) of an output whose models reproduce
    their own windows (median free-run R^2 of the recent windows >= ``change_min_r2``, 0.99;
-   otherwise the window is ``unjudged``: e.g. the free-integrator position of the nominal
-   motor under the speed protocol, R^2 about 0.92, whose features wander): the new model's
+   otherwise the window is ``unjudged``: e.g. a model of a plant the structure cannot
+   describe, whose features wander), and only under the excitation of the reference window
+   (the first after a (re)start): the Bhattacharyya overlap of the window's input spectrum
+   with the reference's must reach 0.95 (:data:`.change.SAME_EXCITATION`), because models
+   fitted to different bands differ with no change in the plant. A window under another
+   excitation (a chirp elsewhere in its sweep) is ``unjudged`` without breaking the run of
+   comparable windows: under a 10 s chirp the detector compares the windows at the same
+   phase of the sweep, 10 s apart. The features: the new model's
    free-run NRMSE on its own window (a window spanning a change fits worse); the
    out-of-sample error of the previous window's model on the ``hop`` newest samples (free
    run over the window, NRMSE of the new samples);
@@ -48,15 +54,27 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .change import (
+    SAME_EXCITATION,
     ChangeConfig,
+    ChangeDecision,
     ChangeDetector,
     FeatureSpec,
+    input_spectrum,
     jaccard_distance,
+    spectral_overlap,
 )
 from .errors import DataError, PmsmSysidError
 from .gfrf import Gfrf
 from .identifiability import excitation_summary
-from .identify import METHODS, FitConfig, IdentifyResult, fit_narx, validate_narx
+from .identify import (
+    FORMS,
+    METHODS,
+    FitConfig,
+    IdentifyResult,
+    fit_narx,
+    output_increments,
+    validate_narx,
+)
 from .model import NarxModel, Structure
 from .online import NS_PER_S, Window
 from .prediction import one_step_ahead, simulate
@@ -83,6 +101,12 @@ class OutputConfig:
     output: str
     fit: FitConfig
     input: str = "thrust"
+    form: str = "level"  # or "difference": the output's increment per sample
+
+    @property
+    def history(self) -> int:
+        """Samples before a window that its first rows need (one more for an increment)."""
+        return self.fit.structure.max_lag + (self.form == "difference")
 
 
 @dataclass(frozen=True)
@@ -117,7 +141,7 @@ class TrackerConfig:
 
     @property
     def history(self) -> int:
-        return max(o.fit.structure.max_lag for o in self.outputs)
+        return max(o.history for o in self.outputs)
 
 
 def tracker_config(p: Mapping[str, Any]) -> TrackerConfig:
@@ -131,9 +155,12 @@ def tracker_config(p: Mapping[str, Any]) -> TrackerConfig:
     for o in outs:
         st = Structure(ny=int(p[f"{o}.ny"]), nu=int(p[f"{o}.nu"]),
                        degree=int(p[f"{o}.degree"]), delay=int(p[f"{o}.delay"]))
+        form = str(p.get(f"{o}.form", "level"))
+        if form not in FORMS:
+            raise DataError(f"{o}.form must be one of {', '.join(FORMS)}, got '{form}'")
         cfgs.append(OutputConfig(o, FitConfig(structure=st, n_terms=int(p[f"{o}.terms"]),
                                               criterion=str(p["criterion"]),
-                                              method=str(p["method"]))))
+                                              method=str(p["method"])), form=form))
     change = ChangeConfig(baseline=int(p["change.baseline"]), warmup=int(p["change.warmup"]),
                           s_confirm=float(p["change.s_confirm"]),
                           holdoff=max(0, int(p["window"]) // max(1, int(p["hop"])) - 1))
@@ -180,6 +207,7 @@ class _OutputTrack:
         self.previous_stop: int | None = None
         self.ref_freq: float | None = None
         self.ref_phase: float | None = None
+        self.ref_spectrum: FloatArray | None = None
         self.r2: deque[float] = deque(maxlen=tc.change.baseline)
         self.held: deque[_Held] = deque(maxlen=max_held)
 
@@ -242,11 +270,15 @@ class WindowTracker:
         r2 = est["r2"] if est["r2"] is not None and not est["free_run_diverged"] else -math.inf
         track.r2.append(float(r2))
         follows = track.previous_stop == w.stop_index - self.config.hop
+        same = self._same_excitation(track, w, u)
         monitored = (follows and len(track.r2) >= 3
                      and float(np.median(track.r2)) >= self.config.change_min_r2)
-        decision = track.detector.update(w.seq, feats if monitored else {})
+        if monitored and not same:  # not comparable: the detector neither judges nor forgets
+            decision = ChangeDecision(w.seq, "unjudged")
+        else:
+            decision = track.detector.update(w.seq, feats if monitored else {})
         if decision.changed:
-            track.ref_freq = None
+            track.ref_freq = track.ref_spectrum = None
         decision = replace(decision, values=feats)
         ident = {"output": name, "model_id": model_json["model_id"]}
         acc["decisions"].append({**ident, **decision.to_dict()})
@@ -259,12 +291,26 @@ class WindowTracker:
         track.previous, track.previous_stop = model, w.stop_index
 
     # -- pieces -----------------------------------------------------------------------
+    @staticmethod
+    def _same_excitation(track: _OutputTrack, w: Window, u: FloatArray) -> bool:
+        """Is the window's input spectrum that of the reference window (the first after a
+        (re)start)? Models are compared only under the same excitation: a sweep moves them
+        with no change in the plant."""
+        spec = input_spectrum(u[-(w.stop_index - w.start_index):])
+        if track.ref_spectrum is None:
+            track.ref_spectrum = spec
+        return spectral_overlap(spec, track.ref_spectrum) >= SAME_EXCITATION
+
     def _series(self, w: Window, cfg: OutputConfig) -> tuple[FloatArray, FloatArray]:
-        """Output and input with the structure's L lag samples before the window."""
+        """Output and input with the structure's L lag samples before the window (the
+        output as its increments when the output's form is 'difference')."""
         lag = cfg.fit.structure.max_lag
         first = w.history - lag
-        return (w.signal(cfg.output, with_history=True)[first:],
-                w.signal(cfg.input, with_history=True)[first:])
+        y = w.signal(cfg.output, with_history=True)
+        u = w.signal(cfg.input, with_history=True)[first:]
+        if cfg.form == "difference":
+            return output_increments(y[first - 1:], None), u
+        return y[first:], u
 
     def _fit(self, cfg: OutputConfig, y: FloatArray, u: FloatArray, fs: float,
              info: dict[str, Any]) -> tuple[dict[str, Any], NarxModel]:
@@ -278,7 +324,7 @@ class WindowTracker:
             input=cfg.input, output=cfg.output, sample_rate_hz=fs, fit=fit, validation=report,
             estimate=(info["start_index"], info["stop_index"]), validate=None,
             excitation=excitation_summary(u[lag:], fs).to_dict(), timing_ms=fit.timing_ms,
-            speed_derived=bool(info.get("speed_derived")))
+            speed_derived=bool(info.get("speed_derived")), form=cfg.form)
         out = {**result.to_dict(), "window": info, "model_id": f"{cfg.output}/{info['seq']}",
                "fit_time_ms": 1e3 * (time.perf_counter() - t0)}
         return out, fit.model
