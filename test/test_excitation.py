@@ -118,6 +118,23 @@ def test_aprbs_levels_and_holds() -> None:
     assert np.std(u) > 8.0
 
 
+def test_broadband_is_flat_to_near_nyquist_and_persistently_exciting() -> None:
+    """The run's default: every 0.25 Hz line in 0.5-240 Hz at one level, 60 N peak, and of
+    persistent-excitation order >= 40 over 40 input lags (the speed structure's)."""
+    from pmsm_sysid.core.datacheck import describe_fit_data
+    from pmsm_sysid.core.model import Structure
+
+    u = make_excitation("broadband", 2000, FS, seed=2)  # one 4 s period
+    spec = np.abs(np.fft.rfft(u))
+    f = np.fft.rfftfreq(len(u), 1 / FS)
+    lines = spec > 1e-6 * spec.max()
+    assert np.allclose(f[lines][[0, -1]], [0.5, 240.0])
+    assert lines.sum() == 959 and np.ptp(spec[lines]) < 1e-9 * spec.max()
+    assert np.max(np.abs(u)) == pytest.approx(60.0)
+    check = describe_fit_data(u, Structure(ny=30, nu=40, degree=2, delay=1))
+    assert check.pe_order == 40 and not check.warnings
+
+
 @pytest.mark.parametrize("kind", EXCITATIONS)
 def test_blocks_concatenate_and_seed_determines(kind: str) -> None:
     src = ExcitationSource(kind, FS, seed=11)
@@ -128,7 +145,7 @@ def test_blocks_concatenate_and_seed_determines(kind: str) -> None:
     np.testing.assert_array_equal(make_excitation(kind, 3000, FS, seed=11), whole)
     assert src.value(1234) == whole[1234]
     other = ExcitationSource(kind, FS, seed=12).block(0, 3000)
-    if kind in ("multisine", "prbs", "aprbs"):
+    if kind in ("multisine", "prbs", "aprbs", "broadband"):
         assert not np.array_equal(other, whole)
     else:  # deterministic signals without random parameters
         np.testing.assert_array_equal(other, whole)

@@ -14,7 +14,8 @@ HELP = "offline: run the motor model faster than real time and write a recording
 #: Output options, checked before any work starts (see common.check_outputs).
 OUTPUTS = {"json": "file", "out": "bag"}
 
-EXCITATIONS = ("paper-speed", "paper-position", "multisine", "chirp", "prbs", "aprbs")
+EXCITATIONS = ("paper-speed", "paper-position", "multisine", "chirp", "prbs", "aprbs",
+               "broadband")
 
 
 def _option(text: str) -> tuple[str, Any]:

@@ -14,6 +14,12 @@ N, giving
 plus a slow
   positioning move (cosine at 0.5 Hz, 3 N) that gives the cm-scale travel of Fig. 7 of Liu et al.
   (2005) and the output energy near 0 Hz the paper reports.
+* ``broadband`` (the default of ``pmsm-sysid run``): the multisine below on every 0.25 Hz
+  line from 0.5 Hz to 240 Hz (0.96 x Nyquist at 500 Hz; lines at or above Nyquist are
+  dropped), random phases, 60 N peak (about 19 N rms, speeds of about +-7 cm/s rms). Its
+  spectrum is flat over almost the whole band, so it is persistently exciting of order 40 and
+  more over 40 input lags, and its amplitude takes many values, so products of lagged inputs
+  (degree-2 NARX terms) are distinguishable from the linear ones.
 * ``multisine``: flat amplitude spectrum on every FFT line of one period within
   [f_min_hz, f_max_hz], random (seeded) or Schroeder phases, scaled to the peak.
 * ``chirp``: swept sine f0_hz -> f1_hz over period_s (linear or logarithmic), repeated.
@@ -39,11 +45,12 @@ from .errors import ExcitationError
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-EXCITATIONS = ("paper-speed", "paper-position", "multisine", "chirp", "prbs", "aprbs")
+EXCITATIONS = ("paper-speed", "paper-position", "multisine", "chirp", "prbs", "aprbs",
+               "broadband")
 
 DEFAULT_AMPLITUDE_N: dict[str, float] = {
     "paper-speed": 50.0, "paper-position": 40.0, "multisine": 30.0,
-    "chirp": 30.0, "prbs": 20.0, "aprbs": 20.0,
+    "chirp": 30.0, "prbs": 20.0, "aprbs": 20.0, "broadband": 60.0,
 }
 
 DEFAULT_OPTIONS: dict[str, dict[str, Any]] = {
@@ -54,6 +61,7 @@ DEFAULT_OPTIONS: dict[str, dict[str, Any]] = {
     "chirp": {"f0_hz": 2.0, "f1_hz": 50.0, "period_s": 10.0, "method": "linear"},
     "prbs": {"order": 10, "hold": 5},
     "aprbs": {"min_hold": 10, "max_hold": 100, "period_s": 20.0},
+    "broadband": {"f_min_hz": 0.5, "f_max_hz": 240.0, "period_s": 4.0, "phases": "random"},
 }
 
 _CHOICES: dict[str, tuple[str, ...]] = {
@@ -210,7 +218,7 @@ class ExcitationSource:
                 raise ExcitationError(f"{self.kind}: frequency_hz must be below Nyquist "
                                       f"({fs / 2} Hz)")
             return _paper(fs, amp, o)
-        if self.kind == "multisine":
+        if self.kind in ("multisine", "broadband"):
             return _multisine(fs, amp, o, rng)
         if self.kind == "chirp":
             return _chirp(fs, amp, o)

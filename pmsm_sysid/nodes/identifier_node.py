@@ -60,14 +60,16 @@ from .params import (
 OK, WARN = DiagnosticStatus.OK, DiagnosticStatus.WARN
 DRAIN_ROUNDS = 100  # at most 300 input messages taken per subscription callback
 
-#: Parameters and their defaults (paper structures: speed ny=30 nu=40, position ny=10 nu=10).
+#: Parameters and their defaults (paper structures: speed ny=30 nu=40, position ny=10 nu=10;
+#: position as its increment per sample, linear: bounded in free run).
 DEFAULTS: dict[str, Any] = {
     "input_layout": "topics", "joint_name": "", "joint_state_topic": "joint_states",
     "window": 1000, "hop": 250, "queue_size": 1, "sample_rate_hz": 0.0, "tolerance_s": 0.0,
     "outputs": ["speed", "position"], "method": "ofr", "criterion": "terms",
     "speed.ny": 30, "speed.nu": 40, "speed.degree": 2, "speed.delay": 1, "speed.terms": 15,
-    "position.ny": 10, "position.nu": 10, "position.degree": 2, "position.delay": 1,
-    "position.terms": 15, "min_r2": 0.9, "change.s_confirm": 7.0,
+    "speed.form": "level",
+    "position.ny": 10, "position.nu": 10, "position.degree": 1, "position.delay": 1,
+    "position.terms": 15, "position.form": "difference", "min_r2": 0.9, "change.s_confirm": 7.0,
     "change.baseline": 24, "change.warmup": 8, "change.min_r2": 0.99,
     "publish_period_s": 0.05, "stale_after_s": 1.0,
     "speed_source": "auto", "inputs_report_s": 3.0, "fit_worker": "process",
@@ -122,6 +124,8 @@ class IdentifierNode(Node):
             self._fit, speed_expected=self._speed_published)
         self.settings_changes = 0
         self.last: dict[str, Any] = {"models": {}, "validation": {}, "changes": []}
+        #: per output: [cross-validations passed, cross-validations made] over the run
+        self.validation_counts: dict[str, list[int]] = {}
         self.models_published = 0
         self.errors: list[str] = []
         self._last_input: float | None = None  # time.monotonic() of the newest input message
@@ -336,6 +340,9 @@ class IdentifierNode(Node):
             for v in r.validations:
                 self.last["validation"][v["output"]] = v
                 self.numbers.validation(v)
+                count = self.validation_counts.setdefault(v["output"], [0, 0])
+                count[0] += bool(v["pass"])
+                count[1] += 1
         if r.changes:
             arr = DiagnosticArray(status=[self._change_status(c) for c in r.changes])
             arr.header.stamp = stamp
@@ -385,6 +392,7 @@ class IdentifierNode(Node):
                 "stale_events": self.stale_events, "last_input_age_s": self.input_age_s(),
                 "models": dict(self.last["models"]),
                 "validation": dict(self.last["validation"]),
+                "validation_counts": {k: list(v) for k, v in self.validation_counts.items()},
                 "change_events": list(self.last["changes"]), "errors": list(self.errors)}
 
     def destroy_node(self) -> None:

@@ -103,6 +103,8 @@ def _output_specs(o: str) -> dict[str, Spec]:
         f"{o}.delay": Spec(f"input delay d of the {o} model in samples", 1, 100),
         f"{o}.terms": Spec(f"terms the {o} model may select (the constant not counted)",
                            1, 1000),
+        f"{o}.form": Spec(f"'level': the {o} as measured; 'difference': its increment per "
+                          f"sample (bounded free run of an integrating output)"),
     }
 
 
