@@ -2,8 +2,9 @@
 
 The recording is replayed by the ``replay`` verb in its own process; the identifier and GFRF
 nodes run as ``run --nodes identifier,gfrf`` composes them. Every window the identifier
-fits (both outputs) is identified again offline from the bag with ``--estimate a:b`` of that
-window: terms must be identical and estimates equal to 1e-9.
+fits (both outputs; position as its increments, ``--form difference``) is identified again
+offline from the bag with ``--estimate a:b`` of that window: terms must be identical and
+estimates equal to 1e-9.
 """
 
 from __future__ import annotations
@@ -85,7 +86,7 @@ def test_replayed_bag_gives_the_offline_models(ros_context: Any, ros_env: int,
         cfg = FitConfig(structure=Structure(st["ny"], st["nu"], st["degree"], st["delay"]),
                         method=m["method"])
         ref = identify_recording(rec, output=m["output"], config=cfg, estimate=(a, b),
-                                 validate=None).to_dict()
+                                 validate=None, form=m["form"]).to_dict()
         assert [t["name"] for t in m["terms"]] == [t["name"] for t in ref["terms"]], m["model_id"]
         got, want = NarxModel.from_dict(m), NarxModel.from_dict(ref)
         np.testing.assert_allclose(got.estimates, want.estimates, rtol=1e-9, atol=0)

@@ -58,8 +58,9 @@ def _data_check(name: str, model: dict[str, Any] | None) -> str | None:
 
 
 def verdict(s: dict[str, Any]) -> dict[str, Any]:
-    """``{"status": "pass" | "warning" | "FAIL", "failures": [...], "warnings": [...],
-    "outputs": [...]}`` of a run summary (see the module doc)."""
+    """``{"status": "pass" | "warning" | "FAIL" | "none", "failures": [...],
+    "warnings": [...], "outputs": [...]}`` of a run summary (see the module doc; "none":
+    nothing identified in this process, e.g. ``--nodes sim``)."""
     vals = s.get("last_validations") or {}
     models = s.get("last_models") or {}
     counts = s.get("validation_counts") or {}
@@ -96,7 +97,12 @@ def verdict(s: dict[str, Any]) -> dict[str, Any]:
                        ("windows_skipped", "windows skipped")):
         if s.get(key):
             warnings.append(f"{s[key]} {label}")
-    status = "FAIL" if failures else "warning" if warnings or not names else "pass"
+    if not names and s.get("samples_received") is not None:
+        warnings.append("no model fitted yet")
+    if not names and not failures and not warnings:  # no identifier in this process
+        status = "none"
+    else:
+        status = "FAIL" if failures else "warning" if warnings else "pass"
     return {"status": status, "failures": failures, "warnings": warnings, "outputs": outputs}
 
 
@@ -130,4 +136,5 @@ def headline(s: dict[str, Any]) -> str:
     if r and r.get("h1", {}).get("peaks"):
         parts.append(_h1_text(r))
     parts.append(f"{len(s['change_events'])} change event(s)")
-    return f"{v['status']}: " + "; ".join(parts)
+    line = "; ".join(parts)
+    return line if v["status"] == "none" else f"{v['status']}: {line}"

@@ -1,0 +1,84 @@
+"""The verdict and one-line summary of ``pmsm-sysid run`` name what failed."""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+from pmsm_sysid.cli.run_verdict import headline, verdict
+
+
+def _tests(failed: tuple[str, ...] = ()) -> dict[str, Any]:
+    return {k: {"pass": k not in failed, "max_abs": 0.05, "band": 0.062}
+            for k in ("ee", "ue", "u2e", "u2e2", "e_eu")}
+
+
+def _validation(output: str, r2: float = 0.996, failed: tuple[str, ...] = (),
+                diverged: bool = False) -> dict[str, Any]:
+    ok = not failed and not diverged and r2 >= 0.9
+    return {"output": output, "pass": ok, "min_r2": 0.9, "correlation_tests": _tests(failed),
+            "free_run": {"r2": r2, "nrmse": (1 - r2) ** 0.5, "diverged": diverged}}
+
+
+def _summary() -> dict[str, Any]:
+    models = {o: {"output": o, "terms": [{}] * 16, "data_check": {"warnings": [],
+                                                                  "pe_order": 40,
+                                                                  "pe_required": 40}}
+              for o in ("speed", "position")}
+    return {"samples_published": 15000, "samples_received": 15000, "samples_dropped": 0,
+            "samples_missing": 0, "windows_fitted": 56, "windows_skipped": 0,
+            "last_models": models, "last_model": models["speed"], "last_ridges": None,
+            "last_validations": {o: _validation(o) for o in ("speed", "position")},
+            "validation_counts": {"speed": [50, 52], "position": [49, 52]},
+            "change_events": [], "errors": []}
+
+
+def test_a_passing_run_says_pass_with_its_figures() -> None:
+    s = _summary()
+    assert verdict(s)["status"] == "pass"
+    line = headline(s)
+    assert line.startswith("pass: speed validation pass (free-run R2 0.9960, correlation "
+                           "tests 5/5, 50/52 windows passed); position validation pass")
+    assert "windows fitted 56, skipped 0" in line and line.endswith("0 change event(s)")
+
+
+def test_a_failure_names_the_output_and_the_test() -> None:
+    s = _summary()
+    s["last_validations"]["position"] = _validation("position", failed=("ee", "u2e"))
+    line = headline(s)
+    assert line.startswith("FAIL: position validation FAIL: correlation tests ee, u2e failed "
+                           "on its estimation window (free-run R2 0.9960, 49/52 windows")
+    assert "speed validation pass" in line  # the output that passed is still reported
+    s["last_validations"]["speed"] = _validation("speed", r2=0.85)
+    assert "speed validation FAIL: free-run R2 0.8500 < 0.9 on the next window" in headline(s)
+    s["last_validations"]["speed"] = _validation("speed", diverged=True)
+    assert "speed validation FAIL: free run diverged on the next window" in headline(s)
+
+
+def test_fit_errors_warnings_and_changes_are_named() -> None:
+    s = _summary()
+    s["errors"] = ["position/12: InsufficientExcitationError: thrust is constant"]
+    v = verdict(s)
+    assert v["status"] == "FAIL" and "position/12" in v["failures"][0]
+    s = _summary()
+    s["last_models"]["speed"]["data_check"] = {
+        "warnings": ["insufficient excitation: thrust is persistently exciting of order 2"],
+        "pe_order": 2, "pe_required": 40}
+    s["windows_skipped"] = 9
+    s["change_events"] = [{"output": "speed", "window": {"end_stamp": 8.5},
+                           "reasons": ["h1_gain_db", "xval_nrmse"]}]
+    line = headline(s)
+    assert line.startswith("warning: speed data check: insufficient excitation (persistently "
+                           "exciting of order 2 < 40 input lags); 1 change event(s): speed at "
+                           "8.50 s (h1_gain_db, xval_nrmse); 9 windows skipped; speed "
+                           "validation pass")
+
+
+def test_no_identifier_here_has_no_verdict_and_no_model_yet_is_a_warning() -> None:
+    s = _summary()
+    s.update(last_models={}, last_model=None, last_validations={}, samples_received=None)
+    assert verdict(s)["status"] == "none"
+    assert headline(s).startswith("published 15000 samples")
+    s2 = copy.deepcopy(s)
+    s2["samples_received"] = 100
+    assert headline(s2).startswith("warning: no model fitted yet")
