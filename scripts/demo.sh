@@ -7,9 +7,9 @@ mkdir -p "$OUT"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}
 step() { printf '\n== %s\n' "$*"; }
 
-step "1/5 live pipeline: simulated motor (paper bench: Table 1 + sensor noise) + identifier + GFRF in one process (10 s)"
+step "1/5 live pipeline, defaults: simulated drive (Table 1 motor, 1 um scale noise, broadband thrust) + identifier + GFRF in one process (10 s)"
 rm -rf "$OUT/live_bag"
-$CLI run --plant paper_bench --duration 10 --record "$OUT/live_bag" --json "$OUT/run.json"
+$CLI run --duration 10 --record "$OUT/live_bag" --json "$OUT/run.json"
 
 step "2/5 offline identification of the bundled recording (paper's speed protocol)"
 $CLI identify bags/paper_speed_nominal --json "$OUT/identify.json"
