@@ -93,6 +93,7 @@ def test_two_processes_give_the_one_process_models(ros_context: Any, ros_env: in
         err_lines.wait_for("running", 120)  # the identification side spins
         sim = subprocess.run([*CLI, "--nodes", "sim", "--clock", "sim", "--rate", "1",
                               "--wait", "60", "--subscribers", "2",  # identifier, recorder
+                              "--excitation", "broadband",
                               "--plant", str(PLANT), "--seed", "7", "--duration", str(SECONDS),
                               "--json", str(tmp_path / "sim.json")],
                              env=env, capture_output=True, text=True, timeout=120)
@@ -120,6 +121,7 @@ def test_two_processes_give_the_one_process_models(ros_context: Any, ros_env: in
     assert len(remote) == s["models_published"] == 8
 
     with build_pipeline(["sim", "identifier"], plant=load_plant(PLANT), seed=7, clock="sim",
+                        excitation="broadband",
                         context=ros_context, identifier_params={"outputs": ["speed"]}) as pipe:
         pipe.run(SECONDS)
         pipe.finish()
