@@ -2,10 +2,14 @@
 
 Status ``pass``: every identified output's latest model passed its cross-validation, no fit
 failed, no data-check warning on the latest models, no change event, nothing dropped or
-skipped. ``FAIL``: a latest validation failed, a fit failed or the recording lost samples (the
-line names the output and the test or reason). ``warning``: everything else that is not a
-pass (data-check warnings, change events, dropped samples, skipped windows, an input
-problem, an output not validated yet), named.
+skipped. ``FAIL``: a fit failed, the recording lost samples, or an output's latest
+cross-validation failed in a way a correct model does not: its free run diverged or fell
+below ``min_r2``, or its correlation tests failed and so did more of the run's windows than
+chance explains (the tests reject a correct model in about 1 window in 20: more failures
+than the 99 % point of Binomial(windows, 0.05)). The line names the output and the test or
+reason. ``warning``: everything else that is not a pass, named (a latest window that failed
+a correlation test within that chance, data-check warnings, change events, dropped samples,
+skipped windows, an input problem, an output not validated yet).
 """
 
 from __future__ import annotations
@@ -30,6 +34,21 @@ def _failure(v: dict[str, Any]) -> str:
     return "; ".join(reasons) or "failed"
 
 
+#: share of windows in which the correlation tests reject a correct model (validation.py)
+CHANCE_FAIL = 0.05
+
+
+def _by_chance(v: dict[str, Any], count: list[int] | None) -> bool:
+    """Could this failed validation be the tests' chance rejection of a correct model?"""
+    fr = v["free_run"]
+    if fr.get("diverged") or fr.get("r2") is None or fr["r2"] < v["min_r2"] or not count:
+        return False
+    from scipy.stats import binom
+
+    passed, made = count
+    return made - passed <= int(binom.ppf(0.99, made, CHANCE_FAIL))
+
+
 def _output_text(name: str, v: dict[str, Any] | None, count: list[int] | None) -> str:
     if v is None:
         return f"{name} not validated yet"
@@ -41,6 +60,9 @@ def _output_text(name: str, v: dict[str, Any] | None, count: list[int] | None) -
     if v["pass"]:
         return (f"{name} validation pass (free-run R2 {r2}, correlation tests "
                 f"{n_pass}/{len(tests)}{runs})")
+    if _by_chance(v, count):
+        return (f"{name} latest validation failed: {_failure(v)} (free-run R2 {r2}{runs}: "
+                f"within the 1 in 20 windows where the tests reject a correct model)")
     return f"{name} validation FAIL: {_failure(v)} (free-run R2 {r2}{runs})"
 
 
@@ -73,7 +95,7 @@ def verdict(s: dict[str, Any]) -> dict[str, Any]:
         if v is None:
             warnings.append(text)
         elif not v["pass"]:
-            failures.append(text)
+            (warnings if _by_chance(v, counts.get(name)) else failures).append(text)
         check = _data_check(name, models.get(name))
         if check:
             warnings.append(check)
