@@ -222,13 +222,15 @@ def test_position_only_topics_give_the_offline_models_of_derived_speed(ros_conte
     assert ins["speed"] == "derived from position"
     assert ins["arrived"]["/pmsm/thrust"]["rate_hz"] == pytest.approx(500.0)
     rec = _derived_reference(data)
-    cfg = FitConfig(structure=Structure(3, 3, 2, 1), n_terms=6, method="ofr")
     assert len(models) == 2 * 5  # windows ending at 400 .. 800
     for m in models:
         a, b = m["window"]["start_index"], m["window"]["stop_index"]
         assert m["speed_derived"] is (m["output"] == "speed")
+        st = m["structure"]  # position: linear, in increments (the defaults)
+        cfg = FitConfig(structure=Structure(st["ny"], st["nu"], st["degree"], st["delay"]),
+                        n_terms=6, method="ofr")
         ref = identify_recording(rec, output=m["output"], config=cfg, estimate=(a, b),
-                                 validate=None)
+                                 validate=None, form=m["form"])
         got = NarxModel.from_dict(m)
         assert got.term_names == ref.model.term_names
         np.testing.assert_allclose(got.estimates, ref.model.estimates, rtol=1e-12, atol=0)
