@@ -87,7 +87,9 @@ def verdict(s: dict[str, Any]) -> dict[str, Any]:
     models = s.get("last_models") or {}
     counts = s.get("validation_counts") or {}
     names = list(dict.fromkeys([*models, *vals]))
-    failures, warnings, outputs = [], [], []
+    failures: list[str] = []
+    warnings: list[str] = []
+    outputs: list[str] = []
     for name in names:
         v = vals.get(name)
         text = _output_text(name, v, counts.get(name))
