@@ -115,7 +115,7 @@ def verdict(s: dict[str, Any]) -> dict[str, Any]:
     if s.get("recorded_messages") is not None and s.get("record_samples_lost"):
         failures.append(f"recording lost {s['record_samples_lost']} samples")
     elif s.get("record") and s.get("recorded_messages") is None:
-        failures.append("recording not finalised (counts unknown)")
+        failures.append(f"recording not finalised ({s.get('record_error') or 'counts unknown'})")
     for key, label in (("samples_dropped", "samples dropped"),
                        ("samples_missing", "samples missing"),
                        ("windows_skipped", "windows skipped")):
