@@ -98,7 +98,9 @@ class BagRecorder:
             self._sqlite.commit()
             self._sqlite.execute("PRAGMA journal_mode=WAL")
         self._conns: dict[str, Connection] = {}
-        self._lock = threading.Lock()
+        # re-entrant: a Ctrl-C that lands between acquiring and entering a `with` block leaks
+        # the lock in the main thread; close() in that same thread must still get it
+        self._lock = threading.RLock()
         self._closed = False
         self._last_flush = time.monotonic()
         self.messages_written = 0
