@@ -115,7 +115,7 @@ def test_emps_walkthrough_live_equals_offline(ros_context: Any, ros_env: int,
         cfg = FitConfig(structure=Structure(st["ny"], st["nu"], st["degree"], st["delay"]),
                         method=m["method"])
         ref = identify_recording(rec, output=m["output"], config=cfg, estimate=(a, b),
-                                 validate=None).to_dict()
+                                 validate=None, form=m["form"]).to_dict()
         assert [t["name"] for t in m["terms"]] == [t["name"] for t in ref["terms"]], m["model_id"]
         got, want = NarxModel.from_dict(m), NarxModel.from_dict(ref)
         np.testing.assert_allclose(got.estimates, want.estimates, rtol=1e-9, atol=0)
