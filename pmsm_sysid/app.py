@@ -163,6 +163,8 @@ class Pipeline:
             for pub in self.sim.publishers:
                 pub.wait_for_all_acked(Duration(seconds=min(timeout_s, 2.0)))
         if ident is not None:
+            if self.sim is not None:
+                ident.end_of_input()
             ident.engine.flush()
             ident.engine.wait_idle(timeout_s)
             ident.publish_results()
@@ -303,6 +305,8 @@ def build_pipeline(
             elif pipe.sim is not None and wait_s > 0 and "identifier" not in names:
                 _wait_until_matched(pipe.sim, executor, wait_s, subscribers)
             pipe.started = time.monotonic()
+            if pipe.identifier is not None:
+                pipe.identifier.restart_input_clock()
             yield pipe
         finally:
             _shutdown(pipe)

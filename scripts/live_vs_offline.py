@@ -41,7 +41,8 @@ def compare(model: dict[str, Any], rec: Any) -> tuple[bool, float]:
                     n_terms=len(model["terms"]) - int(model.get("dc_removed", True)),
                     method=model["method"])
     ref = identify_recording(rec, output=model["output"], config=cfg,
-                             estimate=(a, a + w["n_samples"]), validate=None).to_dict()
+                             estimate=(a, a + w["n_samples"]), validate=None,
+                             form=model.get("form", "level")).to_dict()
     same = [t["name"] for t in model["terms"]] == [t["name"] for t in ref["terms"]]
     if not same:
         return False, float("inf")

@@ -90,7 +90,10 @@ def test_recorder_readable_while_open(tmp_path: Path) -> None:
 
 
 CHILD = r"""
-import contextlib, sys, time
+import contextlib, signal, sys, time
+# Ctrl-C raises KeyboardInterrupt even when started from a shell that ignores SIGINT
+# (a background job inherits SIG_IGN, and Python then installs no handler)
+signal.signal(signal.SIGINT, signal.default_int_handler)
 from pmsm_sysid.bagio import BagRecorder, sigterm_as_exit, typestore
 store = typestore()
 T = store.types

@@ -57,7 +57,9 @@ def test_sigterm_mid_run_finalises_the_recording(ros_env: int, tmp_path: Path) -
                             stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and not _recorded(bag) > 3000:
+        # stop once at least 1000 samples and two models are committed to the bag
+        while time.monotonic() < deadline and not (_recorded(bag) > 3000
+                                                   and _recorded(bag, "/pmsm/model") >= 2):
             time.sleep(0.5)
         assert proc.poll() is None, proc.communicate()
         proc.send_signal(signal.SIGTERM)
@@ -82,17 +84,21 @@ def test_sigterm_mid_run_finalises_the_recording(ros_env: int, tmp_path: Path) -
     assert counts.get("/pmsm/model", 0) == s["models_published"] >= 2
 
 
-def _recorded(bag: Path) -> int:
+def _recorded(bag: Path, topic: str | None = None) -> int:
+    """Messages committed to the bag so far (on ``topic``, or in all)."""
     meta = bag / "metadata.yaml"
     if not meta.exists():
         return 0
     import yaml
 
     try:
-        info: Any = yaml.safe_load(meta.read_text())
-    except yaml.YAMLError:
+        info: Any = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+        if topic is None:
+            return int(info["message_count"])
+        return sum(int(t["message_count"]) for t in info["topics_with_message_count"]
+                   if t["topic_metadata"]["name"] == topic)
+    except (OSError, yaml.YAMLError, KeyError, TypeError):
         return 0
-    return int(info["rosbag2_bagfile_information"]["message_count"])
 
 
 @pytest.mark.parametrize("argv,match", [

@@ -108,7 +108,8 @@ def verdict(s: dict[str, Any]) -> dict[str, Any]:
     if changes:
         where = ", ".join(f"{c['output']} at {c['window']['end_stamp']:.2f} s "
                           f"({', '.join(c['reasons'])})" for c in changes[-3:])
-        warnings.append(f"{len(changes)} change event(s): {where}")
+        last = "the last 3: " if len(changes) > 3 else ""
+        warnings.append(f"{len(changes)} change event(s): {last}{where}")
     inputs = s.get("inputs") or {}
     if inputs.get("problem"):
         warnings.append(str(inputs["problem"]))
@@ -159,6 +160,9 @@ def headline(s: dict[str, Any]) -> str:
         parts.append(f"last {m['output']} model {len(m['terms'])} terms")
     if r and r.get("h1", {}).get("peaks"):
         parts.append(_h1_text(r))
-    parts.append(f"{len(s['change_events'])} change event(s)")
+    if s.get("recorded_messages") is not None and not s.get("record_samples_lost"):
+        parts.append(f"recorded {s['recorded_messages']} messages, no sample lost")
+    if not s["change_events"]:
+        parts.append("0 change event(s)")
     line = "; ".join(parts)
     return line if v["status"] == "none" else f"{v['status']}: {line}"

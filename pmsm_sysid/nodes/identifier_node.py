@@ -130,6 +130,7 @@ class IdentifierNode(Node):
         self.errors: list[str] = []
         self._last_input: float | None = None  # time.monotonic() of the newest input message
         self.stale = False
+        self._input_ended = False  # this pipeline's sim has published its last sample
         self.stale_events = 0
         self._model_pub = self.create_publisher(String, MODEL, 50)
         self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION, 50)
@@ -263,8 +264,20 @@ class IdentifierNode(Node):
         """Seconds since the newest input message (None before the first one)."""
         return None if self._last_input is None else time.monotonic() - self._last_input
 
+    def restart_input_clock(self) -> None:
+        """The inputs start now (the pipeline held its sim until a recorder was ready): the
+        account of the inputs is due ``inputs_report_s`` from here."""
+        self._started = time.monotonic()
+
+    def end_of_input(self) -> None:
+        """The sim of this pipeline published its last sample: silence from now on is the
+        end of the run, not stale input."""
+        self._input_ended = True
+
     def _check_stale(self) -> None:
         age = self.input_age_s()
+        if self._input_ended:
+            return
         if age is not None and not self.stale and age > float(self.params["stale_after_s"]):
             self._report_stale(True, age)
 
