@@ -27,7 +27,7 @@ $(STAMP): requirements.lock setup.py setup.cfg package.xml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	ROS_LOG_DIR=$(CURDIR)/$(DEMO_DIR)/ros_log bash scripts/demo.sh $(DEMO_DIR)
+	ROS_LOG_DIR=$(abspath $(DEMO_DIR))/ros_log bash scripts/demo.sh $(DEMO_DIR)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check pmsm_sysid test bench scripts

@@ -26,4 +26,4 @@ if $CLI report --help >/dev/null 2>&1; then
   $CLI report "$OUT/diagnose.json" --out "$OUT/diagnose_report"
 fi
 echo
-echo "demo outputs in $(pwd)/$OUT"
+echo "demo outputs in $(realpath -m "$OUT")"

@@ -138,7 +138,8 @@ def _fmt(value: Any, std: float | None) -> str:
     if isinstance(value, list):
         return "[" + ", ".join(
             "h{order}: {amp:.3g} N".format(order=h["order"], amp=h["amplitude_n"])
-            if isinstance(h, dict) and "order" in h else str(h) for h in value) + "]"
+            if isinstance(h, dict) and "order" in h
+            else f"{h:.5g}" if isinstance(h, float) else str(h) for h in value) + "]"
     return str(value)
 
 
