@@ -1,6 +1,6 @@
 """Thrust excitation signals, seeded and deterministic.
 
-Every signal is a pure function of the sample index ``k`` (and the seed), so any block of it
+Every signal is a pure function of the sample index ``k`` (and the random seed), so any block of it
 can be produced on its own: ``block(0, 10) == concat(block(0, 4), block(4, 6))``. The random
 signals (multisine, PRBS, APRBS) and the chirp are periodic with a documented period.
 

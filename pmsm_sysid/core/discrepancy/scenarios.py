@@ -39,7 +39,7 @@ LOOP_HZ = 15.0
 
 @dataclass(frozen=True)
 class Scenario:
-    """A plant, how it is driven, and the seed of the committed bag."""
+    """A plant, how it is driven, and the random seed of the committed bag."""
 
     name: str
     plant: Plant
