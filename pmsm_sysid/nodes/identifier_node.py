@@ -39,7 +39,7 @@ from std_msgs.msg import String
 
 from ..bagio.cdr import decode_stamped
 from ..core.engine import EngineConfig, OnlineEngine, WindowError
-from ..core.errors import DataError, PmsmSysidError
+from ..core.errors import DataError
 from ..core.gfrf_analysis import json_safe
 from ..core.inputs import InputReport, describe_inputs
 from ..core.online import Window
@@ -53,6 +53,7 @@ from .params import (
     IDENTIFIER_SPECS,
     TRACKER_KEYS,
     SwitchableProcessor,
+    apply_or_refuse,
     check_identifier,
     declare_all,
 )
@@ -157,12 +158,7 @@ class IdentifierNode(Node):
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         """Validate a change as a whole; apply it to the next windows (see :mod:`.params`)."""
-        changes = {p.name: p.value for p in params}
-        try:
-            self._apply(changes)
-        except PmsmSysidError as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
-        return SetParametersResult(successful=True)
+        return apply_or_refuse(self._apply, params)
 
     def _apply(self, changes: dict[str, Any]) -> None:
         candidate = {**self.params, **{k: v for k, v in changes.items() if k in self.params}}

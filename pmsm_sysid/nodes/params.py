@@ -290,3 +290,16 @@ def check_orders(orders: Sequence[int]) -> tuple[int, ...]:
     if not out or any(o not in (1, 2, 3) for o in out):
         raise DataError(f"parameter orders must be among 1, 2, 3 (got {list(out)})")
     return out
+
+
+def apply_or_refuse(apply: Callable[[dict[str, Any]], None],
+                    params: Sequence[Any]) -> Any:
+    """An on-set-parameters answer: ``apply`` the change as a whole, or refuse it with the
+    reason a :class:`PmsmSysidError` gives."""
+    from rcl_interfaces.msg import SetParametersResult
+
+    try:
+        apply({p.name: p.value for p in params})
+    except PmsmSysidError as exc:
+        return SetParametersResult(successful=False, reason=str(exc))
+    return SetParametersResult(successful=True)

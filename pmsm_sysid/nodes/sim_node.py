@@ -55,7 +55,7 @@ from ..core.plant import EFFECT_BLOCKS, Plant, nominal_plant, plant_from_dict, p
 from ..rosutil import data_qos, make_sample_messages, seconds_to_ns, stamp_from_ns
 from ..topics import DEFAULT_NAMESPACE, INPUT_TYPES, POSITION, SPEED, THRUST
 from .health import HealthPublisher, sim_health
-from .params import declare_all, sim_specs
+from .params import apply_or_refuse, declare_all, sim_specs
 
 ParamValue = bool | int | float | str
 FIXED = ("sample_rate_hz", "seed", "clock", "frame_id")
@@ -282,12 +282,7 @@ class MotorSimNode(Node):
 
     # ------------------------------------------------------------------ parameters
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        changes = {p.name: p.value for p in params}
-        try:
-            self._apply(changes)
-        except PmsmSysidError as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
-        return SetParametersResult(successful=True)
+        return apply_or_refuse(self._apply, params)
 
     def _apply(self, changes: dict[str, Any]) -> None:
         fixed = [n for n in changes if n in FIXED and changes[n] != self.values[n]]
