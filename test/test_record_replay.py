@@ -222,3 +222,44 @@ def test_cli_errors_are_one_line(ros_env: int, tmp_path: Path) -> None:
         assert proc.returncode == 2, (argv, proc.stderr)
         lines = proc.stderr.strip().splitlines()
         assert len(lines) == 1 and text in lines[0], (argv, proc.stderr)
+
+
+def test_a_starved_recorder_keeps_every_message_received_before_the_stop(
+        ros_context: Any, tmp_path: Path) -> None:
+    """The recorder's executor never spins while 3000 samples arrive (a starved process):
+    what it stores at the stop is every message received before it, and no more than the
+    first one after it on each topic; the count is set by the queue, not by a clock."""
+    from rclpy.node import Node
+
+    from pmsm_sysid.bagio import BagRecorder
+    from pmsm_sysid.nodes.recorder import RecorderNode
+    from pmsm_sysid.rosutil import data_qos, message_class
+    from pmsm_sysid.topics import SPEED_TYPE
+
+    ns, n_before, n_after = _unique_ns(), 3000, 40
+    with BagRecorder(tmp_path / "rec") as recorder:
+        rec_node = RecorderNode(recorder, context=ros_context, namespace=ns,
+                                topics=[f"{ns}/speed"])
+        pub_node = Node("starved_pub", context=ros_context)
+        pub = pub_node.create_publisher(message_class(SPEED_TYPE), f"{ns}/speed", data_qos())
+        try:
+            while pub.get_subscription_count() < 1:   # discovery, then publish into the queue
+                time.sleep(0.01)
+            msg = message_class(SPEED_TYPE)()
+            for k in range(n_before):
+                msg.header.stamp.nanosec = k * 2_000_000 % NS
+                msg.header.stamp.sec = k * 2_000_000 // NS
+                pub.publish(msg)
+            assert pub.wait_for_all_acked()
+            stop_ns = time.time_ns()
+            time.sleep(0.01)
+            for _ in range(n_after):
+                pub.publish(msg)
+            assert pub.wait_for_all_acked()
+            assert rec_node.total == 0                 # nothing spun: all of it is queued
+            stored = rec_node.take_received_before(stop_ns)
+        finally:
+            pub_node.destroy_node()
+            rec_node.destroy_node()
+    assert stored == n_before + 1
+    assert len(_raw(tmp_path / "rec")[f"{ns}/speed"]) == n_before + 1

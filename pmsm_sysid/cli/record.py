@@ -38,9 +38,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _drain(session: Any, node: Any, quiet_s: float = 0.3, max_s: float = 3.0) -> None:
-    """After a stop, take what already arrived: spin until no message came for ``quiet_s``."""
+    """After a stop, keep what already arrived, however slow this process is.
+
+    First every message received before the stop is taken from the queues (bounded by what
+    is queued, not by a clock); then the executor spins until no message came for
+    ``quiet_s`` (at most ``max_s``) to take what was in flight when the stop came.
+    """
     import time
 
+    node.take_received_before(time.time_ns())
     end = time.monotonic() + max_s
     last_total, last_change = node.total, time.monotonic()
     while time.monotonic() < end and time.monotonic() - last_change < quiet_s:

@@ -161,6 +161,27 @@ class RecorderNode(Node):
             if not took:
                 return
 
+    def take_received_before(self, stop_ns: int) -> int:
+        """Store every message that reached this process before ``stop_ns`` (system clock).
+
+        Takes each topic's waiting messages in order until its queue is empty or it yields a
+        message received after ``stop_ns`` (stored too: it is real data). The work is bounded
+        by what is queued, not by time, so a starved recorder still keeps every message that
+        arrived before it was told to stop. Returns how many messages it stored.
+        """
+        stored = 0
+        for topic, msgtype, sub in self._subs:
+            while True:
+                with sub.handle:
+                    got = sub.handle.take_message(sub.msg_type, True)
+                if got is None:
+                    break
+                self._store(topic, msgtype, got[0], got[1])
+                stored += 1
+                if int(got[1].get("received_timestamp") or 0) > stop_ns:
+                    break
+        return stored
+
     def summary(self) -> dict[str, Any]:
         """Messages per topic, and the stamp gaps and samples missing per input topic."""
         return {"messages": self.total, "topics": dict(self.counts),
