@@ -1,6 +1,6 @@
 """An independent simulator of a linear drive for the diagnose battery.
 
-It shares nothing with ``pmsm_sysid.core.physics`` but the parameter values of the nominal
+It shares nothing with ``pmsm_sysid.core.physics.motor`` but the parameter values of the nominal
 motor: its own RK4 integration (10 steps per sample, lag as a state), its own friction
 regularisation (``v / sqrt(v² + eps²)``), its own noise streams, and effects the library does
 not have (a localized force bump, friction over part of the stroke, an actuator dead zone, a
@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from pmsm_sysid.core.excitation import make_excitation
-from pmsm_sysid.core.signals import Recording
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.recording.signals import Recording
 
 FloatArray = NDArray[np.float64]
 

@@ -3,8 +3,8 @@
 For every packaged excitation, ``--duration`` seconds (default one hour) of the simulated
 motor (``--plant``, default the ``run`` default ``drive``; seed ``--seed``) go sample by
 sample through the identifier's own data path, without ROS: the window ring
-(:class:`~pmsm_sysid.core.online.WindowScheduler`) cuts a window every hop and the
-:class:`~pmsm_sysid.core.tracker.WindowTracker` with the identifier node's default
+(:class:`~pmsm_sysid.core.online.streaming.WindowScheduler`) cuts a window every hop and the
+:class:`~pmsm_sysid.core.online.tracker.WindowTracker` with the identifier node's default
 parameters fits, cross-validates and judges it, as ``pmsm-sysid run`` does with no window
 skipped (the simulated clock). Deterministic: same plant, seed and duration, same table.
 
@@ -29,10 +29,10 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
-from pmsm_sysid.core.excitation import EXCITATIONS
-from pmsm_sysid.core.livesim import simulated_windows
-from pmsm_sysid.core.plant import load_plant
-from pmsm_sysid.core.tracker import WindowResult, WindowTracker, tracker_config
+from pmsm_sysid.core.online.livesim import simulated_windows
+from pmsm_sysid.core.online.tracker import WindowResult, WindowTracker, tracker_config
+from pmsm_sysid.core.physics.excitation import EXCITATIONS
+from pmsm_sysid.core.physics.plant import load_plant
 from pmsm_sysid.nodes.identifier_node import DEFAULTS
 
 

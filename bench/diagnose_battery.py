@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from battery_plant import B0, M0, Case, Truth, record
 
 from pmsm_sysid.core.discrepancy import DiagnoseOptions, diagnose
-from pmsm_sysid.core.plant import nominal_plant
+from pmsm_sysid.core.physics.plant import nominal_plant
 
 CONTROLS = ("nominal", "process_noise")
 TOL = {"mass_kg": 0.03, "amplitude_n": 0.25, "static_n": 0.35, "pitch_m": 0.03,

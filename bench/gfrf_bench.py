@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pmsm_sysid.core.gfrf import Gfrf
-from pmsm_sysid.core.gfrf_analysis import analyse
-from pmsm_sysid.core.model import NarxModel
+from pmsm_sysid.core.frequency.analysis import analyse
+from pmsm_sysid.core.frequency.gfrf import Gfrf
+from pmsm_sysid.core.terms.model import NarxModel
 
 MODEL = Path(__file__).resolve().parents[1] / "examples" / "paper_table2_speed.json"
 

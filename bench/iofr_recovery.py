@@ -21,10 +21,10 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy import signal  # noqa: E402
 
-from pmsm_sysid.core.candidates import candidate_set  # noqa: E402
-from pmsm_sysid.core.identify import FitConfig, fit_narx  # noqa: E402
-from pmsm_sysid.core.model import NarxModel, Structure  # noqa: E402
-from pmsm_sysid.core.prediction import simulate  # noqa: E402
+from pmsm_sysid.core.selection.identify import FitConfig, fit_narx  # noqa: E402
+from pmsm_sysid.core.terms.candidates import candidate_set  # noqa: E402
+from pmsm_sysid.core.terms.model import NarxModel, Structure  # noqa: E402
+from pmsm_sysid.core.validation.prediction import simulate  # noqa: E402
 
 ST = Structure(ny=3, nu=3, degree=2)
 

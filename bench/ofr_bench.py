@@ -29,10 +29,10 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from pmsm_sysid.core.candidates import count_candidates  # noqa: E402
-from pmsm_sysid.core.identify import FitConfig, fit_narx  # noqa: E402
-from pmsm_sysid.core.model import Structure, Term  # noqa: E402
-from pmsm_sysid.core.regressors import MAX_MATRIX_BYTES  # noqa: E402
+from pmsm_sysid.core.selection.identify import FitConfig, fit_narx  # noqa: E402
+from pmsm_sysid.core.terms.candidates import count_candidates  # noqa: E402
+from pmsm_sysid.core.terms.model import Structure, Term  # noqa: E402
+from pmsm_sysid.core.terms.regressors import MAX_MATRIX_BYTES  # noqa: E402
 
 FS = 500.0
 PLANT = Path(__file__).resolve().parents[1] / "plants" / "nominal_noisy.yaml"
@@ -41,9 +41,9 @@ PLANT = Path(__file__).resolve().parents[1] / "plants" / "nominal_noisy.yaml"
 def bench_data(n: int) -> tuple[np.ndarray, np.ndarray, str]:
     """(speed, thrust, description): the simulated motor if available, else a stand-in."""
     try:
-        from pmsm_sysid.core.excitation import make_excitation
-        from pmsm_sysid.core.physics import simulate
-        from pmsm_sysid.core.plant import load_plant
+        from pmsm_sysid.core.physics.excitation import make_excitation
+        from pmsm_sysid.core.physics.motor import simulate
+        from pmsm_sysid.core.physics.plant import load_plant
 
         plant = load_plant(PLANT)
         u = make_excitation("paper-speed", n, FS, seed=0)

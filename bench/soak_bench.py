@@ -138,11 +138,11 @@ def engine_overload(minutes: float, factor: float, interval: float) -> dict[str,
     node's default fits) at ``factor`` x 500 Hz, paced in 10 ms blocks."""
     import threading
 
-    from pmsm_sysid.core.engine import EngineConfig, OnlineEngine
-    from pmsm_sysid.core.excitation import make_excitation
-    from pmsm_sysid.core.physics import simulate
-    from pmsm_sysid.core.plant import nominal_plant
-    from pmsm_sysid.core.tracker import WindowTracker, tracker_config
+    from pmsm_sysid.core.online.engine import EngineConfig, OnlineEngine
+    from pmsm_sysid.core.online.tracker import WindowTracker, tracker_config
+    from pmsm_sysid.core.physics.excitation import make_excitation
+    from pmsm_sysid.core.physics.motor import simulate
+    from pmsm_sysid.core.physics.plant import nominal_plant
     from pmsm_sysid.nodes.identifier_node import DEFAULTS
 
     fs, seconds = 500.0, 60.0 * minutes

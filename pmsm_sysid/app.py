@@ -33,7 +33,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from .core.errors import PmsmSysidError
-from .core.plant import Plant
+from .core.physics.plant import Plant
 from .topics import DEFAULT_NAMESPACE
 
 NODES = ("sim", "identifier", "gfrf")

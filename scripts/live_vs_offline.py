@@ -19,8 +19,8 @@ import numpy as np
 
 from pmsm_sysid.bagio import bag_topics, iter_raw, read_recording
 from pmsm_sysid.bagio.common import typestore
-from pmsm_sysid.core.identify import FitConfig, identify_recording
-from pmsm_sysid.core.model import Structure
+from pmsm_sysid.core.selection.identify import FitConfig, identify_recording
+from pmsm_sysid.core.terms.model import Structure
 
 
 def live_models(path: str) -> list[dict[str, Any]]:

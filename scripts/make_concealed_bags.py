@@ -16,7 +16,7 @@ from pathlib import Path
 
 from pmsm_sysid.bagio import write_recording
 from pmsm_sysid.core.discrepancy.scenarios import SCENARIOS, make_recording
-from pmsm_sysid.core.plant import dump_plant
+from pmsm_sysid.core.physics.plant import dump_plant
 
 
 def main() -> int:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from pmsm_sysid.core.model import Structure, Term
+from pmsm_sysid.core.terms.model import Structure, Term
 
 LINEAR = {"y(k-1)": 0.5, "y(k-2)": -0.3, "u(k-1)": 1.0, "u(k-2)": 0.4}
 # The example: plain FROLS (and SysIdentPy) pick u(k-2) instead of y(k-2).

@@ -20,7 +20,7 @@ from pmsm_sysid import topics as tp
 from pmsm_sysid.bagio import connection_args, storage_plugin, typestore, write_recording
 from pmsm_sysid.bagio.cdr import encode_stamped
 from pmsm_sysid.cli import main
-from pmsm_sysid.core.signals import Recording
+from pmsm_sysid.core.recording.signals import Recording
 
 EXE = Path(sys.executable).with_name("pmsm-sysid")
 FS = 500.0

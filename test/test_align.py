@@ -7,8 +7,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from pmsm_sysid.core.align import align_streams, mutual_nearest, robust_period
 from pmsm_sysid.core.errors import DataError
+from pmsm_sysid.core.recording.align import align_streams, mutual_nearest, robust_period
 
 FS = 500.0
 DT = 1.0 / FS

@@ -262,7 +262,7 @@ def test_impossible_numbers(capsys: pytest.CaptureFixture[str], argv: list[str],
 def test_identifier_that_no_window_can_fit_is_refused_at_start(
         capsys: pytest.CaptureFixture[str]) -> None:
     from pmsm_sysid.core.errors import DataError
-    from pmsm_sysid.core.tracker import tracker_config
+    from pmsm_sysid.core.online.tracker import tracker_config
     from pmsm_sysid.nodes.identifier_node import DEFAULTS
 
     p = dict(DEFAULTS)

@@ -28,8 +28,8 @@ from reliability_helpers import SMALL, input_messages, known_data, recording, wr
 
 from pmsm_sysid.cli import main
 from pmsm_sysid.core.errors import PlantError
-from pmsm_sysid.core.plant import EFFECT_BLOCKS, Plant, plant_from_dict
-from pmsm_sysid.core.plant_schema import BOUNDS
+from pmsm_sysid.core.physics.plant import EFFECT_BLOCKS, Plant, plant_from_dict
+from pmsm_sysid.core.physics.plant_schema import BOUNDS
 
 SETTINGS = settings(max_examples=30, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow,

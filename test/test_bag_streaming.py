@@ -15,8 +15,8 @@ from reliability_helpers import bag_of, known_data
 import pmsm_sysid as ps
 from pmsm_sysid.bagio import read_recording
 from pmsm_sysid.bagio.read import READ_MARGIN
-from pmsm_sysid.core.identify import FitConfig, identify_recording
-from pmsm_sysid.core.model import Structure
+from pmsm_sysid.core.selection.identify import FitConfig, identify_recording
+from pmsm_sysid.core.terms.model import Structure
 
 WINDOW = {"ny": 2, "nu": 2, "terms": 5, "estimate": (1000, 2000), "validate": (3000, 4000)}
 

@@ -23,7 +23,7 @@ from pmsm_sysid.bagio import (
     write_recording,
 )
 from pmsm_sysid.core.errors import BagError
-from pmsm_sysid.core.signals import Recording, derive_speed
+from pmsm_sysid.core.recording.signals import Recording, derive_speed
 
 STORAGES = ["mcap", "sqlite3"]
 JAZZY = get_typestore(Stores.ROS2_JAZZY)

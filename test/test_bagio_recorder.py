@@ -15,7 +15,7 @@ from rosbags.highlevel import AnyReader
 
 from pmsm_sysid.bagio import BagRecorder, iter_raw, read_recording, typestore, write_recording
 from pmsm_sysid.core.errors import BagError
-from pmsm_sysid.core.signals import Recording
+from pmsm_sysid.core.recording.signals import Recording
 
 POS = "geometry_msgs/msg/PointStamped"
 

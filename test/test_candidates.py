@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pmsm_sysid.core.candidates import MAX_CANDIDATES, candidate_set, count_candidates
 from pmsm_sysid.core.errors import DataError, IdentificationError
-from pmsm_sysid.core.model import Structure, Term
-from pmsm_sysid.core.regressors import (
+from pmsm_sysid.core.terms.candidates import MAX_CANDIDATES, candidate_set, count_candidates
+from pmsm_sysid.core.terms.model import Structure, Term
+from pmsm_sysid.core.terms.regressors import (
     DenseProjector,
     ExplicitRegressors,
     ProductGram,

@@ -9,7 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pmsm_sysid.core.change import (
+from pmsm_sysid.core.errors import DataError
+from pmsm_sysid.core.online.change import (
     ChangeConfig,
     ChangeDetector,
     FeatureSpec,
@@ -17,7 +18,6 @@ from pmsm_sysid.core.change import (
     combined_score,
     jaccard_distance,
 )
-from pmsm_sysid.core.errors import DataError
 
 FEATURES = (
     FeatureSpec("err", one_sided=True, floor=1e-3, rel_floor=0.05),
@@ -171,8 +171,8 @@ def test_after_a_change_the_window_spanning_it_is_not_learnt() -> None:
 
 def _simulate(plant: Any, n: int, seed: int, change_at: int | None = None,
               after: Any = None, amplitude_n: float = 10.0) -> np.ndarray:
-    from pmsm_sysid.core.excitation import make_excitation
-    from pmsm_sysid.core.physics import MotorSimulator
+    from pmsm_sysid.core.physics.excitation import make_excitation
+    from pmsm_sysid.core.physics.motor import MotorSimulator
 
     u = make_excitation("paper-speed", n, plant.sample_rate_hz, seed=seed,
                         amplitude_n=amplitude_n)
@@ -189,8 +189,8 @@ def _simulate(plant: Any, n: int, seed: int, change_at: int | None = None,
 
 def _changes(data: np.ndarray) -> list[int]:
     """Stops of the windows where the speed tracker reports a change (paper defaults)."""
-    from pmsm_sysid.core.online import Window
-    from pmsm_sysid.core.tracker import WindowTracker, tracker_config
+    from pmsm_sysid.core.online.streaming import Window
+    from pmsm_sysid.core.online.tracker import WindowTracker, tracker_config
     from pmsm_sysid.nodes.identifier_node import DEFAULTS
 
     tracker = WindowTracker(tracker_config({**DEFAULTS, "outputs": ["speed"]}))
@@ -215,7 +215,7 @@ def _resonant() -> Any:
 def test_no_false_alarm_on_the_simulated_motor_over_a_long_run() -> None:
     """80 windows (40 s) of the paper's protocol on the noisy nominal motor and on the
     resonant one: no change reported."""
-    from pmsm_sysid.core.plant import load_plant
+    from pmsm_sysid.core.physics.plant import load_plant
 
     noisy = load_plant("plants/nominal_noisy.yaml")
     assert _changes(_simulate(noisy, 21000, seed=11, amplitude_n=50.0)) == []
@@ -229,7 +229,7 @@ def test_a_plant_change_is_reported_within_three_windows(kind: str) -> None:
     the first window holding new data ends at 4250; the change is reported by 4750."""
     from dataclasses import replace
 
-    from pmsm_sysid.core.plant import load_plant
+    from pmsm_sysid.core.physics.plant import load_plant
 
     plant = _resonant()
     after = (plant.with_effects(cogging=load_plant("plants/cogging.yaml").cogging)

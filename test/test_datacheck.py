@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from narx_systems import LINEAR, simulate, white_input
 
-from pmsm_sysid.core.datacheck import check_fit_data, pe_order
 from pmsm_sysid.core.errors import DataError, InsufficientExcitationError
-from pmsm_sysid.core.identify import FitConfig, fit_narx
-from pmsm_sysid.core.model import Structure
+from pmsm_sysid.core.selection.datacheck import check_fit_data, pe_order
+from pmsm_sysid.core.selection.identify import FitConfig, fit_narx
+from pmsm_sysid.core.terms.model import Structure
 
 K = np.arange(1200)
 ST = Structure(ny=4, nu=12, degree=2)

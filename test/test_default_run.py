@@ -1,7 +1,7 @@
 """What a new user's first ``pmsm-sysid run`` identifies, without ROS.
 
 The default plant, excitation and identifier parameters go through the identifier's own data
-path (:func:`pmsm_sysid.core.livesim.simulated_windows` + the :class:`WindowTracker`), as
+path (:func:`pmsm_sysid.core.online.livesim.simulated_windows` + the :class:`WindowTracker`), as
 ``run --clock sim`` feeds them when no window is skipped: the models must be true of the
 motor, the tool's own checks quiet, and the change detector silent on a stationary plant yet
 quick on a real change.
@@ -16,11 +16,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pmsm_sysid.core.gfrf import Gfrf
-from pmsm_sysid.core.livesim import simulated_windows
-from pmsm_sysid.core.model import NarxModel
-from pmsm_sysid.core.plant import Plant, load_plant
-from pmsm_sysid.core.tracker import WindowTracker, tracker_config
+from pmsm_sysid.core.frequency.gfrf import Gfrf
+from pmsm_sysid.core.online.livesim import simulated_windows
+from pmsm_sysid.core.online.tracker import WindowTracker, tracker_config
+from pmsm_sysid.core.physics.plant import Plant, load_plant
+from pmsm_sysid.core.terms.model import NarxModel
 from pmsm_sysid.nodes.identifier_node import DEFAULTS
 
 
@@ -127,10 +127,10 @@ def test_position_in_difference_form_stays_bounded_where_its_level_does_not() ->
     0.996 over 2 s), and only gets worse with time: its integrator pole, estimated a hair
     off 1, lets the free-run error grow without bound."""
     from pmsm_sysid.core.errors import DataError
-    from pmsm_sysid.core.excitation import make_excitation
-    from pmsm_sysid.core.identify import FitConfig, identify_recording
-    from pmsm_sysid.core.model import Structure
-    from pmsm_sysid.core.physics import simulate
+    from pmsm_sysid.core.physics.excitation import make_excitation
+    from pmsm_sysid.core.physics.motor import simulate
+    from pmsm_sysid.core.selection.identify import FitConfig, identify_recording
+    from pmsm_sysid.core.terms.model import Structure
 
     plant = load_plant("drive")
     rec = simulate(plant, make_excitation("broadband", 5000, plant.sample_rate_hz), seed=3)

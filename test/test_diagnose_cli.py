@@ -10,8 +10,8 @@ import pytest
 
 from pmsm_sysid.bagio import write_recording
 from pmsm_sysid.cli import main
-from pmsm_sysid.core.plant import load_plant, plant_from_dict
-from pmsm_sysid.core.signals import Recording
+from pmsm_sysid.core.physics.plant import load_plant, plant_from_dict
+from pmsm_sysid.core.recording.signals import Recording
 
 REPO = Path(__file__).resolve().parents[1]
 NOMINAL = str(REPO / "plants" / "nominal.yaml")

@@ -25,7 +25,7 @@ from pmsm_sysid.core.discrepancy.scenarios import (
     TRUTH_TOLERANCE,
     make_recording,
 )
-from pmsm_sysid.core.plant import load_plant, nominal_plant
+from pmsm_sysid.core.physics.plant import load_plant, nominal_plant
 
 REPO = Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"
@@ -86,7 +86,7 @@ def test_cogging_is_invisible_to_the_papers_narx() -> None:
     """The paper's quadratic NARX (ny 30, nu 40, 15 terms) on the cogging recording passes
     every correlation test and takes no more nonlinear ERR than on the noise-only twin
     (same seed, same thrust): nothing in it answers to the cogging."""
-    from pmsm_sysid.core.identify import identify_recording
+    from pmsm_sysid.core.selection.identify import identify_recording
 
     runs = {}
     for name in ("nominal", "cogging"):

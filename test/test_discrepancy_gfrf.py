@@ -19,10 +19,10 @@ import pytest
 from pmsm_sysid.bagio import read_recording
 from pmsm_sysid.core.discrepancy import DiagnoseOptions, diagnose
 from pmsm_sysid.core.discrepancy.gfrf_compare import gfrf_where, only_in_first
-from pmsm_sysid.core.excitation import make_excitation
-from pmsm_sysid.core.physics import simulate
-from pmsm_sysid.core.plant import CoulombFriction, Noise, Spring, nominal_plant
-from pmsm_sysid.core.signals import Recording
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.physics.motor import simulate
+from pmsm_sysid.core.physics.plant import CoulombFriction, Noise, Spring, nominal_plant
+from pmsm_sysid.core.recording.signals import Recording
 
 REPO = Path(__file__).resolve().parents[1]
 NOISE = Noise(speed_std=0.002, position_std=5e-6, force_std=1.0)

@@ -21,9 +21,9 @@ from pmsm_sysid.core.discrepancy.kinematics import (
     smoothed_speed_noise,
 )
 from pmsm_sysid.core.discrepancy.library import Effect, columns
-from pmsm_sysid.core.excitation import make_excitation
-from pmsm_sysid.core.physics import effects_force, simulate
-from pmsm_sysid.core.plant import (
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.physics.motor import effects_force, simulate
+from pmsm_sysid.core.physics.plant import (
     CoulombFriction,
     Noise,
     Plant,
@@ -32,7 +32,7 @@ from pmsm_sysid.core.plant import (
     TransportDelay,
     nominal_plant,
 )
-from pmsm_sysid.core.signals import Recording
+from pmsm_sysid.core.recording.signals import Recording
 
 FS = 500.0
 

@@ -11,9 +11,9 @@ from pmsm_sysid.core.discrepancy import diagnose
 from pmsm_sysid.core.discrepancy.kinematics import equation_data
 from pmsm_sysid.core.discrepancy.library import Effect, columns
 from pmsm_sysid.core.discrepancy.select import Candidates, _family_err
-from pmsm_sysid.core.excitation import make_excitation
-from pmsm_sysid.core.physics import simulate
-from pmsm_sysid.core.plant import (
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.physics.motor import simulate
+from pmsm_sysid.core.physics.plant import (
     Cogging,
     CoulombFriction,
     ForceOffset,

@@ -17,9 +17,9 @@ from pmsm_sysid.core.discrepancy.closed_loop import (
     reference_trajectory,
     run_closed_loop,
 )
-from pmsm_sysid.core.excitation import make_excitation
-from pmsm_sysid.core.physics import simulate
-from pmsm_sysid.core.plant import Noise, Quantisation, nominal_plant
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.physics.motor import simulate
+from pmsm_sysid.core.physics.plant import Noise, Quantisation, nominal_plant
 
 FS = 500.0
 N = 2500
@@ -85,7 +85,7 @@ def test_one_ms_actuator_lag_with_random_binary_inputs(kind: str) -> None:
     """A held random input is strongly autocorrelated and the motion answers it at once:
     that is no feedback. The 1 ms lag is named (not a delay, not a mass/viscous change)."""
     from pmsm_sysid.core.discrepancy.kinematics import FEEDBACK_Z, feedback_z
-    from pmsm_sysid.core.plant import ThrustLag
+    from pmsm_sysid.core.physics.plant import ThrustLag
 
     noise = Noise(speed_std=0.001, position_std=2e-6, force_std=0.3)
     plant = nominal_plant().with_effects(noise=noise, quantisation=QUANT,

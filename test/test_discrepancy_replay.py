@@ -31,8 +31,8 @@ from pmsm_sysid.core.discrepancy.resim import (
     replay,
 )
 from pmsm_sysid.core.discrepancy.showfit import replay_notes
-from pmsm_sysid.core.plant import Cogging, ForceOffset, Harmonic, load_plant
-from pmsm_sysid.core.signals import Recording
+from pmsm_sysid.core.physics.plant import Cogging, ForceOffset, Harmonic, load_plant
+from pmsm_sysid.core.recording.signals import Recording
 
 REPO = Path(__file__).resolve().parents[1]
 NOMINAL = load_plant(REPO / "plants" / "nominal.yaml")

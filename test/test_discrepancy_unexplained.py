@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from battery_plant import Case, Truth, record
 
 from pmsm_sysid.core.discrepancy import DiagnoseOptions, diagnose
-from pmsm_sysid.core.plant import nominal_plant
+from pmsm_sysid.core.physics.plant import nominal_plant
 
 FAST = DiagnoseOptions(replay=False, gfrf=False)
 

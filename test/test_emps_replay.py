@@ -24,8 +24,8 @@ import pytest
 from conftest import EMPS_MAT
 
 from pmsm_sysid.cli import main
-from pmsm_sysid.core.identify import FitConfig, identify_recording
-from pmsm_sysid.core.model import NarxModel, Structure
+from pmsm_sysid.core.selection.identify import FitConfig, identify_recording
+from pmsm_sysid.core.terms.model import NarxModel, Structure
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 REPO = Path(__file__).resolve().parents[1]

@@ -11,14 +11,14 @@ from hypothesis import strategies as st
 from scipy.signal import chirp, welch
 
 from pmsm_sysid.core.errors import ExcitationError
-from pmsm_sysid.core.excitation import (
+from pmsm_sysid.core.physics.excitation import (
     DEFAULT_AMPLITUDE_N,
     EXCITATIONS,
     ExcitationSource,
     make_excitation,
 )
-from pmsm_sysid.core.physics import simulate
-from pmsm_sysid.core.plant import load_plant, nominal_plant
+from pmsm_sysid.core.physics.motor import simulate
+from pmsm_sysid.core.physics.plant import load_plant, nominal_plant
 
 FS = 500.0
 REPO = Path(__file__).resolve().parents[1]
@@ -121,8 +121,8 @@ def test_aprbs_levels_and_holds() -> None:
 def test_broadband_is_flat_to_near_nyquist_and_persistently_exciting() -> None:
     """The run's default: every 0.25 Hz line in 0.5-240 Hz at one level, 60 N peak, and of
     persistent-excitation order >= 40 over 40 input lags (the speed structure's)."""
-    from pmsm_sysid.core.datacheck import describe_fit_data
-    from pmsm_sysid.core.model import Structure
+    from pmsm_sysid.core.selection.datacheck import describe_fit_data
+    from pmsm_sysid.core.terms.model import Structure
 
     u = make_excitation("broadband", 2000, FS, seed=2)  # one 4 s period
     spec = np.abs(np.fft.rfft(u))

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from pmsm_sysid.core.errors import GfrfError
-from pmsm_sysid.core.gfrf import MAX_GRID, Gfrf, to_hz, to_norm
-from pmsm_sysid.core.model import NarxModel
+from pmsm_sysid.core.frequency.gfrf import MAX_GRID, Gfrf, to_hz, to_norm
+from pmsm_sysid.core.terms.model import NarxModel
 
 A, B, C, D, E, G = 0.6, 1.3, 0.4, -0.7, 0.25, 0.9
 RNG = np.random.default_rng(12345)

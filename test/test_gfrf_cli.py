@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from pmsm_sysid.cli import main
-from pmsm_sysid.core.excitation import make_excitation
-from pmsm_sysid.core.gfrf import Gfrf
-from pmsm_sysid.core.identifiability import excitation_summary
-from pmsm_sysid.core.model import NarxModel
+from pmsm_sysid.core.frequency.gfrf import Gfrf
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.selection.identifiability import excitation_summary
+from pmsm_sysid.core.terms.model import NarxModel
 
 REPO = Path(__file__).resolve().parents[1]
 TABLE2 = REPO / "examples" / "paper_table2_speed.json"

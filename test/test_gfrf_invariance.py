@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 from scipy.signal import cont2discrete
 
-from pmsm_sysid.core.excitation import make_excitation
-from pmsm_sysid.core.gfrf import Gfrf
-from pmsm_sysid.core.identify import FitConfig, fit_narx
-from pmsm_sysid.core.model import Structure
-from pmsm_sysid.core.physics import simulate
-from pmsm_sysid.core.plant import Noise, Spring, ThrustRipple, nominal_plant
-from pmsm_sysid.core.ridges import h1_peaks, h2_ridges
+from pmsm_sysid.core.frequency.gfrf import Gfrf
+from pmsm_sysid.core.frequency.ridges import h1_peaks, h2_ridges
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.physics.motor import simulate
+from pmsm_sysid.core.physics.plant import Noise, Spring, ThrustRipple, nominal_plant
+from pmsm_sysid.core.selection.identify import FitConfig, fit_narx
+from pmsm_sysid.core.terms.model import Structure
 
 M, B, K = 2.3213, 32.4992, 20000.0
 RIPPLE, PITCH = 0.05, 0.05

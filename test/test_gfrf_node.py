@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pmsm_sysid.core.gfrf_analysis import analyse_json
-from pmsm_sysid.core.identifiability import excitation_summary
+from pmsm_sysid.core.frequency.analysis import analyse_json
+from pmsm_sysid.core.selection.identifiability import excitation_summary
 from pmsm_sysid.nodes.gfrf_msgs import (
     COLUMNS_LABEL,
     KIND_CODES,

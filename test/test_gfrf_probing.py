@@ -17,8 +17,8 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from pmsm_sysid.core.gfrf import Gfrf
-from pmsm_sysid.core.model import NarxModel
+from pmsm_sysid.core.frequency.gfrf import Gfrf
+from pmsm_sysid.core.terms.model import NarxModel
 
 P = 2048                     # samples per period of the steady state
 M1, M2 = 61, 157             # FFT bins of the two tones (f = m / P)

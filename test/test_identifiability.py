@@ -7,7 +7,7 @@ import pytest
 from scipy.signal import max_len_seq
 
 from pmsm_sysid.core.errors import DataError, InsufficientExcitationError
-from pmsm_sysid.core.identifiability import (
+from pmsm_sysid.core.selection.identifiability import (
     ExcitationSummary,
     excitation_summary,
     identifiability_block,
@@ -121,10 +121,10 @@ def h1_true(f: np.ndarray) -> np.ndarray:
 def protocol_fits() -> dict[str, dict]:
     """identify (paper defaults: ny 30, nu 40, quadratic, 15 terms, 1000:2000 / 3000:4000)
     on the nominal plant with measurement and process noise, under three excitations."""
-    from pmsm_sysid.core.excitation import make_excitation
-    from pmsm_sysid.core.identify import identify_recording
-    from pmsm_sysid.core.physics import simulate
-    from pmsm_sysid.core.plant import Noise, nominal_plant
+    from pmsm_sysid.core.physics.excitation import make_excitation
+    from pmsm_sysid.core.physics.motor import simulate
+    from pmsm_sysid.core.physics.plant import Noise, nominal_plant
+    from pmsm_sysid.core.selection.identify import identify_recording
 
     plant = nominal_plant().with_effects(noise=Noise(speed_std=0.002, force_std=1.0))
     out = {}
@@ -139,9 +139,9 @@ def test_sinusoidal_protocol_pins_h1_only_at_the_tone(protocol_fits: dict[str, d
     """Under the seed's sinusoidal excitation the model validates (R^2 > 0.99 on new data of
     the same protocol), its H1 is right at 16.5 Hz, wrong elsewhere — and every peak and
     ridge is reported unsupported, with what the result rests on."""
-    from pmsm_sysid.core.gfrf import Gfrf
-    from pmsm_sysid.core.gfrf_analysis import analyse_json
-    from pmsm_sysid.core.model import NarxModel
+    from pmsm_sysid.core.frequency.analysis import analyse_json
+    from pmsm_sysid.core.frequency.gfrf import Gfrf
+    from pmsm_sysid.core.terms.model import NarxModel
 
     d = protocol_fits["paper-speed"]
     assert d["excitation"]["broadband"] is False
@@ -166,9 +166,9 @@ def test_broadband_protocol_recovers_the_true_h1(protocol_fits: dict[str, dict],
                                                  kind: str) -> None:
     """Multisine (1-40 Hz) / PRBS on the same plant: H1 within 3 % of the truth over
     1-40 Hz, no supported resonance (the plant has none), the nonlinear terms flagged weak."""
-    from pmsm_sysid.core.gfrf import Gfrf
-    from pmsm_sysid.core.gfrf_analysis import analyse_json
-    from pmsm_sysid.core.model import NarxModel
+    from pmsm_sysid.core.frequency.analysis import analyse_json
+    from pmsm_sysid.core.frequency.gfrf import Gfrf
+    from pmsm_sysid.core.terms.model import NarxModel
 
     d = protocol_fits[kind]
     assert d["excitation"]["broadband"] is True
@@ -190,8 +190,8 @@ def test_paper_table2_resonance_rests_on_the_tone() -> None:
     import json
     from pathlib import Path
 
-    from pmsm_sysid.core.excitation import make_excitation
-    from pmsm_sysid.core.gfrf_analysis import analyse_json
+    from pmsm_sysid.core.frequency.analysis import analyse_json
+    from pmsm_sysid.core.physics.excitation import make_excitation
 
     d = json.loads((Path(__file__).resolve().parents[1] / "examples"
                     / "paper_table2_speed.json").read_text())

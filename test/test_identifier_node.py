@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pmsm_sysid.core.identify import FitConfig, fit_narx
-from pmsm_sysid.core.model import NarxModel, Structure
+from pmsm_sysid.core.selection.identify import FitConfig, fit_narx
+from pmsm_sysid.core.terms.model import NarxModel, Structure
 
 pytestmark = pytest.mark.ros
 PERIOD_NS = 2_000_000
@@ -203,7 +203,7 @@ def test_bad_parameters_raise_one_clear_error(ros_context: Any, params: dict[str
 
 def _derived_reference(data: np.ndarray) -> Any:
     """The offline recording of thrust and position only: speed derived on reading."""
-    from pmsm_sysid.core.align import align_streams
+    from pmsm_sysid.core.recording.align import align_streams
 
     t = np.arange(len(data)) * PERIOD_NS / 1e9
     rec, _ = align_streams((t, data[:, 0]), None, (t, data[:, 2]))
@@ -211,7 +211,7 @@ def _derived_reference(data: np.ndarray) -> Any:
 
 
 def test_position_only_topics_give_the_offline_models_of_derived_speed(ros_context: Any) -> None:
-    from pmsm_sysid.core.identify import identify_recording
+    from pmsm_sysid.core.selection.identify import identify_recording
 
     data = _data(800, seed=2)
     stats, models, _, summary = _run(ros_context, data, {}, signals=("thrust", "position"))

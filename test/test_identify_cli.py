@@ -11,7 +11,7 @@ from narx_systems import QUADRATIC, names, simulate, white_input
 
 from pmsm_sysid.bagio import write_recording
 from pmsm_sysid.cli import main
-from pmsm_sysid.core.signals import Recording
+from pmsm_sysid.core.recording.signals import Recording
 
 REPO = Path(__file__).resolve().parents[1]
 FS = 500.0

@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pmsm_sysid.core.align import align_streams
 from pmsm_sysid.core.errors import DataError
-from pmsm_sysid.core.inputs import DECIDE_AFTER, InputAligner, SignalCount, describe_inputs
-from pmsm_sysid.core.signals import SpeedDeriver, derive_speed
+from pmsm_sysid.core.online.inputs import DECIDE_AFTER, InputAligner, SignalCount, describe_inputs
+from pmsm_sysid.core.recording.align import align_streams
+from pmsm_sysid.core.recording.signals import SpeedDeriver, derive_speed
 
 TOPICS = {"thrust": "/pmsm/thrust", "speed": "/pmsm/speed", "position": "/pmsm/position"}
 

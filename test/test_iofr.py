@@ -16,12 +16,12 @@ from narx_systems import (
     white_input,
 )
 
-from pmsm_sysid.core.candidates import candidate_set
-from pmsm_sysid.core.identify import FitConfig, fit_narx
-from pmsm_sysid.core.iofr import _Problem, iofr
-from pmsm_sysid.core.model import Structure
-from pmsm_sysid.core.ofr import frols, least_squares, start
-from pmsm_sysid.core.regressors import ExplicitRegressors, lag_base, target
+from pmsm_sysid.core.selection.identify import FitConfig, fit_narx
+from pmsm_sysid.core.selection.iofr import _Problem, iofr
+from pmsm_sysid.core.selection.ofr import frols, least_squares, start
+from pmsm_sysid.core.terms.candidates import candidate_set
+from pmsm_sysid.core.terms.model import Structure
+from pmsm_sysid.core.terms.regressors import ExplicitRegressors, lag_base, target
 
 SYSTEMS = {"linear": (LINEAR, 1), "quadratic": (QUADRATIC, 2), "cubic": (CUBIC, 3),
            "constant": (WITH_CONSTANT, 2)}

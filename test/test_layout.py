@@ -51,3 +51,54 @@ def test_core_imports_no_ros_no_plotting_no_bag_io() -> None:
     bad = {str(p.relative_to(PKG)): sorted(i for i in _imports(p) if i.startswith(banned))
            for p in _modules("core")}
     assert not {k: v for k, v in bad.items() if v}
+
+
+STAGES = ("recording", "terms", "selection", "validation", "frequency", "physics", "online",
+          "discrepancy")
+
+
+def _stage_graph() -> dict[str, set[str]]:
+    """stage -> the other core stages its modules import (at any depth)."""
+    graph: dict[str, set[str]] = {}
+    for stage in STAGES:
+        deps = {i.split(".")[2] for p in _modules(f"core/{stage}") for i in _imports(p)
+                if i.startswith("pmsm_sysid.core.") and len(i.split(".")) > 2}
+        graph[stage] = deps & set(STAGES) - {stage}
+    return graph
+
+
+def test_core_is_grouped_by_stage() -> None:
+    """core/ holds the stage subpackages and the shared error types, nothing else."""
+    core = PKG / "core"
+    assert {p.name for p in core.glob("*.py")} == {"__init__.py", "errors.py"}
+    assert {p.name for p in core.iterdir() if p.is_dir() and p.name != "__pycache__"} \
+        == set(STAGES)
+
+
+def test_every_stage_reexports_its_public_names() -> None:
+    import importlib
+
+    for stage in STAGES:
+        mod = importlib.import_module(f"pmsm_sysid.core.{stage}")
+        names = getattr(mod, "__all__", None)
+        assert names, stage
+        assert all(getattr(mod, n, None) is not None for n in names), stage
+        assert mod.__doc__, stage
+
+
+def test_no_import_cycle_between_stages() -> None:
+    graph = _stage_graph()
+    order: list[str] = []
+
+    def visit(stage: str, path: tuple[str, ...]) -> None:
+        assert stage not in path, " -> ".join((*path, stage))
+        if stage not in order:
+            for dep in sorted(graph[stage]):
+                visit(dep, (*path, stage))
+            order.append(stage)
+
+    for stage in STAGES:
+        visit(stage, ())
+    # the data flow reads from the tree: a recording comes first, the discrepancy last
+    assert graph["recording"] == set() and graph["terms"] == set()
+    assert not any("discrepancy" in deps for deps in graph.values())

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from pmsm_sysid.cli.monitor import render
-from pmsm_sysid.core.monitoring import SysIdView, TopicStats
+from pmsm_sysid.core.online.monitoring import SysIdView, TopicStats
 
 NS = 1_000_000_000
 

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from narx_systems import LINEAR, QUADRATIC, coloured_input, names, simulate, white_input
 
-from pmsm_sysid.core.candidates import candidate_set
 from pmsm_sysid.core.errors import IdentificationError
-from pmsm_sysid.core.identify import FitConfig, fit_narx
-from pmsm_sysid.core.model import Structure
-from pmsm_sysid.core.ofr import frols, information_criterion, least_squares
-from pmsm_sysid.core.regressors import (
+from pmsm_sysid.core.selection.identify import FitConfig, fit_narx
+from pmsm_sysid.core.selection.ofr import frols, information_criterion, least_squares
+from pmsm_sysid.core.terms.candidates import candidate_set
+from pmsm_sysid.core.terms.model import Structure
+from pmsm_sysid.core.terms.regressors import (
     DenseProjector,
     ExplicitRegressors,
     ProductGram,

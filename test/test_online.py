@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pmsm_sysid.core.errors import DataError
-from pmsm_sysid.core.fitqueue import FitWorker, LatestQueue
-from pmsm_sysid.core.online import (
+from pmsm_sysid.core.online.fitqueue import FitWorker, LatestQueue
+from pmsm_sysid.core.online.streaming import (
     SIGNALS,
     Sample,
     StampAligner,

@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pmsm_sysid.core.gfrf import Gfrf
-from pmsm_sysid.core.gfrf_analysis import analyse
-from pmsm_sysid.core.model import NarxModel
-from pmsm_sysid.core.ridges import h1_peaks
+from pmsm_sysid.core.frequency.analysis import analyse
+from pmsm_sysid.core.frequency.gfrf import Gfrf
+from pmsm_sysid.core.frequency.ridges import h1_peaks
+from pmsm_sysid.core.terms.model import NarxModel
 
 REPO = Path(__file__).resolve().parents[1]
 ROW = re.compile(r"^((?:[yu]\(k-\d+\))+) (-?\d\.\d+)(?: e([+-]\d+))? (\d\.\d+)(?: e([+-]\d+))? "

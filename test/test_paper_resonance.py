@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import pytest
 
-from pmsm_sysid.core.excitation import make_excitation
-from pmsm_sysid.core.gfrf_analysis import analyse_json
-from pmsm_sysid.core.identify import identify_recording
-from pmsm_sysid.core.physics import simulate
-from pmsm_sysid.core.plant import Noise, nominal_plant
+from pmsm_sysid.core.frequency.analysis import analyse_json
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.physics.motor import simulate
+from pmsm_sysid.core.physics.plant import Noise, nominal_plant
+from pmsm_sysid.core.selection.identify import identify_recording
 
 FS = 500.0
 TONE_HZ = 16.5

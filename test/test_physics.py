@@ -15,14 +15,14 @@ from scipy.optimize import brentq
 from scipy.signal import cont2discrete
 
 from pmsm_sysid.core.errors import DataError, PlantError
-from pmsm_sysid.core.physics import (
+from pmsm_sysid.core.physics.motor import (
     MotorSimulator,
     effective_substeps,
     effects_force,
     simulate,
     stiff_rate,
 )
-from pmsm_sysid.core.plant import (
+from pmsm_sysid.core.physics.plant import (
     Cogging,
     CoulombFriction,
     ForceOffset,

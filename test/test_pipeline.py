@@ -22,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from pmsm_sysid.core.plant import Noise, Spring, ThrustRipple, load_plant, nominal_plant
+from pmsm_sysid.core.physics.plant import Noise, Spring, ThrustRipple, load_plant, nominal_plant
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 F0 = 16.5

@@ -12,7 +12,7 @@ import pytest
 from scipy import signal
 
 from pmsm_sysid.cli import build_parser
-from pmsm_sysid.core.identifiability import excitation_summary
+from pmsm_sysid.core.selection.identifiability import excitation_summary
 from pmsm_sysid.plots.gfrf import h1_gain_phase
 from pmsm_sysid.report.frequency import _excited
 

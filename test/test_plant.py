@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pmsm_sysid.core.errors import PlantError
-from pmsm_sysid.core.plant import (
+from pmsm_sysid.core.physics.plant import (
     EFFECT_BLOCKS,
     Cogging,
     CoulombFriction,

@@ -14,10 +14,10 @@ import pytest
 from scipy import optimize, signal
 
 from pmsm_sysid import plots
-from pmsm_sysid.core.gfrf import Gfrf
-from pmsm_sysid.core.gfrf_analysis import analyse
-from pmsm_sysid.core.model import NarxModel
-from pmsm_sysid.core.validation import correlation_tests
+from pmsm_sysid.core.frequency.analysis import analyse
+from pmsm_sysid.core.frequency.gfrf import Gfrf
+from pmsm_sysid.core.terms.model import NarxModel
+from pmsm_sysid.core.validation.correlation import correlation_tests
 from pmsm_sysid.progress import Bar, activity, progress, silence
 
 # A resonant linear part: poles r e^{+-j 2 pi F0} -> y(k) = a1 y(k-1) + a2 y(k-2) + ...
@@ -287,7 +287,7 @@ def test_core_never_imports_matplotlib() -> None:
         "for m in pkgutil.walk_packages(core.__path__, 'pmsm_sysid.core.'):\n"
         "    importlib.import_module(m.name)\n"
         "bad = sorted(n for n in sys.modules if n.split('.')[0] in ('matplotlib', 'PIL'))\n"
-        "print(len(list(pkgutil.walk_packages(core.__path__))), bad)\n"
+        "print(len(list(pkgutil.walk_packages(core.__path__, 'pmsm_sysid.core.'))), bad)\n"
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        timeout=120)

@@ -11,9 +11,9 @@ from narx_systems import QUADRATIC, simulate, white_input
 from scipy import signal
 
 from pmsm_sysid.core.errors import DataError
-from pmsm_sysid.core.model import NarxModel
-from pmsm_sysid.core.prediction import free_run, k_step_ahead, one_step_ahead
-from pmsm_sysid.core.prediction import simulate as run
+from pmsm_sysid.core.terms.model import NarxModel
+from pmsm_sysid.core.validation.prediction import free_run, k_step_ahead, one_step_ahead
+from pmsm_sysid.core.validation.prediction import simulate as run
 
 LINEAR3 = {"y(k-1)": 1.2, "y(k-2)": -0.5, "u(k-1)": 0.7, "u(k-3)": 0.2}
 

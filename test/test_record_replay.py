@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pmsm_sysid.core.excitation import ExcitationSource
-from pmsm_sysid.core.physics import simulate
-from pmsm_sysid.core.plant import load_plant
+from pmsm_sysid.core.physics.excitation import ExcitationSource
+from pmsm_sysid.core.physics.motor import simulate
+from pmsm_sysid.core.physics.plant import load_plant
 
 REPO = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "pmsm_sysid.cli"]

@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 from rosbags.highlevel import AnyReader
 
-from pmsm_sysid.core.workerproc import owner_alive
+from pmsm_sysid.core.online.workerproc import owner_alive
 
 REPO = Path(__file__).resolve().parents[1]
 N = 600

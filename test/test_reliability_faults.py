@@ -197,7 +197,7 @@ def _push(engine: Any, stamps_ns: Any, seed: int = 0) -> None:
 
 
 def _engine() -> Any:
-    from pmsm_sysid.core.engine import EngineConfig, OnlineEngine
+    from pmsm_sysid.core.online.engine import EngineConfig, OnlineEngine
 
     engine = OnlineEngine(EngineConfig(window=200, hop=100),
                           lambda w: (w.seq, int(w.stamps_ns[-1] - w.stamps_ns[-2])))
@@ -317,7 +317,7 @@ def test_identifier_node_survives_failing_fits_a_silent_and_a_restarted_publishe
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.parameter import Parameter
 
-    import pmsm_sysid.core.tracker as tracker
+    import pmsm_sysid.core.online.tracker as tracker
     from pmsm_sysid.core.errors import IdentificationError
     from pmsm_sysid.nodes.identifier_node import IdentifierNode
     from pmsm_sysid.nodes.monitor import MonitorNode
@@ -423,10 +423,10 @@ def test_identifier_publishes_diverged_models_as_strict_json(ros_context: Any) -
     from rclpy.node import Node
     from std_msgs.msg import String
 
-    from pmsm_sysid.core.engine import EngineConfig, OnlineEngine
-    from pmsm_sysid.core.identify import FitConfig
-    from pmsm_sysid.core.model import Structure
-    from pmsm_sysid.core.tracker import OutputConfig, TrackerConfig, WindowTracker
+    from pmsm_sysid.core.online.engine import EngineConfig, OnlineEngine
+    from pmsm_sysid.core.online.tracker import OutputConfig, TrackerConfig, WindowTracker
+    from pmsm_sysid.core.selection.identify import FitConfig
+    from pmsm_sysid.core.terms.model import Structure
     from pmsm_sysid.nodes.identifier_node import IdentifierNode
 
     tracker = WindowTracker(TrackerConfig(outputs=(OutputConfig("speed", FitConfig(

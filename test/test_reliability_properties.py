@@ -22,10 +22,10 @@ from reliability_helpers import write_messages
 
 from pmsm_sysid.bagio import read_recording
 from pmsm_sysid.core.errors import BagError, DataError, PmsmSysidError
-from pmsm_sysid.core.gfrf import Gfrf
-from pmsm_sysid.core.gfrf_analysis import analyse
-from pmsm_sysid.core.identify import FitConfig, fit_narx, validate_narx
-from pmsm_sysid.core.model import NarxModel, Structure, Term
+from pmsm_sysid.core.frequency.analysis import analyse
+from pmsm_sysid.core.frequency.gfrf import Gfrf
+from pmsm_sysid.core.selection.identify import FitConfig, fit_narx, validate_narx
+from pmsm_sysid.core.terms.model import NarxModel, Structure, Term
 
 SETTINGS = settings(max_examples=40, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow,

@@ -20,11 +20,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pmsm_sysid.core.excitation import make_excitation
-from pmsm_sysid.core.identify import FitConfig, identify_recording
-from pmsm_sysid.core.model import NarxModel, Structure
-from pmsm_sysid.core.physics import simulate
-from pmsm_sysid.core.plant import load_plant
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.physics.motor import simulate
+from pmsm_sysid.core.physics.plant import load_plant
+from pmsm_sysid.core.selection.identify import FitConfig, identify_recording
+from pmsm_sysid.core.terms.model import NarxModel, Structure
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 REPO = Path(__file__).resolve().parents[1]
@@ -46,7 +46,7 @@ def test_replayed_bag_gives_the_offline_models(ros_context: Any, ros_env: int,
                                                 tmp_path: Path) -> None:
     from pmsm_sysid.app import build_pipeline
     from pmsm_sysid.bagio import read_recording
-    from pmsm_sysid.core.gfrf_analysis import analyse_json
+    from pmsm_sysid.core.frequency.analysis import analyse_json
 
     bag = _bag(tmp_path)
     env = {**os.environ, "ROS_DOMAIN_ID": str(ros_env), "ROS_LOG_DIR": str(tmp_path / "log"),

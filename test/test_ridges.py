@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pmsm_sysid.core.gfrf import Gfrf
-from pmsm_sysid.core.model import NarxModel
-from pmsm_sysid.core.ridges import h1_peaks, h2_ridges, h3_ridges, poles
+from pmsm_sysid.core.frequency.gfrf import Gfrf
+from pmsm_sysid.core.frequency.ridges import h1_peaks, h2_ridges, h3_ridges, poles
+from pmsm_sysid.core.terms.model import NarxModel
 
 R, F0 = 0.97, 0.08
 A1, A2 = 2 * R * np.cos(2 * np.pi * F0), -R * R

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from test_report import REPO, check_page
 
-from pmsm_sysid.core.history import RunHistory
+from pmsm_sysid.core.online.history import RunHistory
 from pmsm_sysid.report.build import report_summary
 
 RUN_FIGURES = {"run_fit", "run_terms", "run_h1", "run_change", "run_latency"}

@@ -12,9 +12,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from pmsm_sysid.core.excitation import ExcitationSource
-from pmsm_sysid.core.physics import MotorSimulator, simulate
-from pmsm_sysid.core.plant import Cogging, load_plant, nominal_plant
+from pmsm_sysid.core.physics.excitation import ExcitationSource
+from pmsm_sysid.core.physics.motor import MotorSimulator, simulate
+from pmsm_sysid.core.physics.plant import Cogging, load_plant, nominal_plant
 from pmsm_sysid.nodes.sim_node import plant_from_parameters, plant_parameters
 
 pytestmark = pytest.mark.ros

@@ -14,9 +14,9 @@ import pytest
 from pmsm_sysid.bagio import read_recording
 from pmsm_sysid.cli import main
 from pmsm_sysid.cli import simulate as simulate_cli
-from pmsm_sysid.core.excitation import EXCITATIONS, make_excitation
-from pmsm_sysid.core.physics import simulate
-from pmsm_sysid.core.plant import load_plant
+from pmsm_sysid.core.physics.excitation import EXCITATIONS, make_excitation
+from pmsm_sysid.core.physics.motor import simulate
+from pmsm_sysid.core.physics.plant import load_plant
 
 REPO = Path(__file__).resolve().parents[1]
 CLI = str(Path(sys.executable).parent / "pmsm-sysid")

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from narx_systems import CUBIC, QUADRATIC, coloured_input, simulate, white_input
 
-from pmsm_sysid.core.identify import FitConfig, fit_narx
-from pmsm_sysid.core.model import Structure, Term
+from pmsm_sysid.core.selection.identify import FitConfig, fit_narx
+from pmsm_sysid.core.terms.model import Structure, Term
 
 sip = pytest.importorskip("sysidentpy", reason="peer library (bench extra) not installed")
 from sysidentpy.basis_function import Polynomial  # noqa: E402

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from pmsm_sysid.core.excitation import make_excitation
-from pmsm_sysid.core.physics import simulate
-from pmsm_sysid.core.plant import nominal_plant, plant_from_dict, plant_to_dict
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.physics.motor import simulate
+from pmsm_sysid.core.physics.plant import nominal_plant, plant_from_dict, plant_to_dict
 
 
 def _plant(thrust_std: float) -> object:

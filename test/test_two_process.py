@@ -80,7 +80,7 @@ class _Lines:
 def test_two_processes_give_the_one_process_models(ros_context: Any, ros_env: int,
                                                    tmp_path: Path) -> None:
     from pmsm_sysid.app import build_pipeline
-    from pmsm_sysid.core.plant import load_plant
+    from pmsm_sysid.core.physics.plant import load_plant
 
     env = {**os.environ, "ROS_DOMAIN_ID": str(ros_env), "ROS_LOG_DIR": str(tmp_path / "log"),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}

@@ -9,9 +9,9 @@ from narx_systems import QUADRATIC, simulate, white_input
 from scipy import signal
 
 from pmsm_sysid.core.errors import DataError
-from pmsm_sysid.core.identify import FitConfig, fit_narx, validate_narx
-from pmsm_sysid.core.model import NarxModel, Structure
-from pmsm_sysid.core.validation import (
+from pmsm_sysid.core.selection.identify import FitConfig, fit_narx, validate_narx
+from pmsm_sysid.core.terms.model import NarxModel, Structure
+from pmsm_sysid.core.validation.correlation import (
     TEST_NAMES,
     correlation_tests,
     fit_metrics,

@@ -10,12 +10,12 @@ import signal
 import pytest
 from narx_systems import QUADRATIC, simulate, white_input
 
-from pmsm_sysid.core.engine import EngineConfig, OnlineEngine, WindowError
-from pmsm_sysid.core.identify import FitConfig
-from pmsm_sysid.core.model import Structure
-from pmsm_sysid.core.online import NS_PER_S
-from pmsm_sysid.core.tracker import OutputConfig, TrackerConfig, WindowResult, WindowTracker
-from pmsm_sysid.core.workerproc import ProcessWorker, WorkerDied
+from pmsm_sysid.core.online.engine import EngineConfig, OnlineEngine, WindowError
+from pmsm_sysid.core.online.streaming import NS_PER_S
+from pmsm_sysid.core.online.tracker import OutputConfig, TrackerConfig, WindowResult, WindowTracker
+from pmsm_sysid.core.online.workerproc import ProcessWorker, WorkerDied
+from pmsm_sysid.core.selection.identify import FitConfig
+from pmsm_sysid.core.terms.model import Structure
 
 CONFIG = TrackerConfig(outputs=(OutputConfig("speed", FitConfig(
     structure=Structure(ny=2, nu=2, degree=2), n_terms=5)),), window=400, hop=200)

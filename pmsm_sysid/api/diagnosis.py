@@ -8,8 +8,8 @@ from typing import Any
 
 from ..core.discrepancy.result import DiagnoseResult
 from ..core.errors import OptionError
-from ..core.plant import Plant
-from ..core.signals import Recording
+from ..core.physics.plant import Plant
+from ..core.recording.signals import Recording
 from . import _checks
 from ._json import plain
 from .simulation import PlantLike, resolve_plant
@@ -89,9 +89,9 @@ def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike |
         >>> d.corrected.coulomb_friction is not None
         True
     """
-    from ..core.datacheck import check_sampling
     from ..core.discrepancy import DiagnoseOptions
     from ..core.discrepancy import diagnose as run_diagnosis
+    from ..core.selection.datacheck import check_sampling
 
     options = DiagnoseOptions(alpha=_checks.fraction("alpha", alpha),
                               min_share=_checks.fraction("min_share", min_share),

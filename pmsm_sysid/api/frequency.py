@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.errors import DataError, GfrfError, IdentificationError, OptionError
-from ..core.gfrf_analysis import MAX_REPORT_GRID, GfrfAnalysis
+from ..core.frequency.analysis import MAX_REPORT_GRID, GfrfAnalysis
 from .identification import Identification
 
 ModelLike = Identification | Mapping[str, Any] | str | os.PathLike[str]
@@ -91,7 +91,7 @@ def gfrf(model: ModelLike, *, at: Iterable[Sequence[float]] = (), grid: int | No
         >>> res.to_dict()["eval"][0]["order"]
         1
     """
-    from ..core.gfrf_analysis import analyse_json
+    from ..core.frequency.analysis import analyse_json
 
     points = _points(at)
     chosen = _check(grid, orders)

@@ -8,15 +8,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..core.errors import OptionError
-from ..core.identify import FORMS, FitConfig, IdentifyResult
-from ..core.model import NarxModel, Structure
-from ..core.ofr import CRITERIA
-from ..core.signals import Recording
+from ..core.recording.signals import Recording
+from ..core.selection.identify import FORMS, FitConfig, IdentifyResult
+from ..core.selection.ofr import CRITERIA
+from ..core.terms.model import NarxModel, Structure
 from . import _checks
 from ._json import plain
 
 if TYPE_CHECKING:
-    from ..core.align import AlignReport
+    from ..core.recording.align import AlignReport
 
 DataLike = Recording | str | os.PathLike[str]
 OUTPUTS = ("speed", "position")
@@ -107,7 +107,7 @@ def identify(data: DataLike, *, output: str = "speed", input: str = "thrust",
         >>> d["validation"]["validation"]["r2"] > 0.99
         True
     """
-    from ..core.identify import identify_recording
+    from ..core.selection.identify import identify_recording
 
     _checks.choice("output", output, OUTPUTS)
     _checks.choice("input", input, ("thrust",))

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..core.errors import OptionError
-from ..core.signals import Recording
+from ..core.recording.signals import Recording
 
 if TYPE_CHECKING:
     from ..bagio import LoadedRecording

@@ -10,9 +10,9 @@ from pathlib import Path
 from typing import Any
 
 from ..core.errors import OptionError
-from ..core.excitation import EXCITATIONS, ExcitationSource
-from ..core.plant import Plant, load_plant, nominal_plant
-from ..core.signals import Recording
+from ..core.physics.excitation import EXCITATIONS, ExcitationSource
+from ..core.physics.plant import Plant, load_plant, nominal_plant
+from ..core.recording.signals import Recording
 from ..validate import MAX_AMPLITUDE_N, check_duration, check_number, check_seed
 from . import _checks
 
@@ -45,7 +45,7 @@ def simulation_run(plant: PlantLike = None, *, excitation: str = "paper-speed",
                    duration: float = 10.0, seed: int = 0, amplitude: float | None = None,
                    excitation_options: Mapping[str, Any] | None = None) -> SimulationRun:
     """:func:`simulate`, keeping the plant and the excitation source."""
-    from ..core.physics import simulate as integrate
+    from ..core.physics.motor import simulate as integrate
 
     _checks.choice("excitation", excitation, EXCITATIONS)
     seconds = _checks.positive("duration", duration)

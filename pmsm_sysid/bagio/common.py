@@ -17,9 +17,9 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from ..core.align import AlignReport
 from ..core.errors import BagError, PmsmSysidError
-from ..core.signals import Recording
+from ..core.recording.align import AlignReport
+from ..core.recording.signals import Recording
 
 FRAME_ID = "pmsm"
 MSG_PACKAGE = "pmsm_sysid/msg"

@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 
 from .. import topics as tp
-from ..core.align import align_streams, robust_period
 from ..core.errors import BagError, DataError
+from ..core.recording.align import align_streams, robust_period
 from .cdr import decode_stamped
 from .common import MAX_NONFINITE_LISTED, LoadedRecording, RawMessage, open_reader, typestore
 

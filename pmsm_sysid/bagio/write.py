@@ -11,7 +11,7 @@ from rosbags.rosbag2 import Writer
 
 from .. import topics as tp
 from ..core.errors import BagError, PmsmSysidError
-from ..core.signals import FloatArray, Recording
+from ..core.recording.signals import FloatArray, Recording
 from .cdr import encode_stamped
 from .common import (
     CUSTOM_PREFIX,

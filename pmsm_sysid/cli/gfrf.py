@@ -40,7 +40,7 @@ def _point(text: str) -> tuple[float, ...]:
 
 
 def _grid(text: str) -> int:
-    from ..core.gfrf_analysis import MAX_REPORT_GRID
+    from ..core.frequency.analysis import MAX_REPORT_GRID
 
     try:
         n = int(text)

@@ -87,8 +87,8 @@ def load_mat(path: str | Path) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     from ..bagio import read_recording, write_recording
-    from ..core.align import robust_period
-    from ..core.signals import Recording, derive_speed
+    from ..core.recording.align import robust_period
+    from ..core.recording.signals import Recording, derive_speed
     from ..validate import atomic_dir
     from .common import write_json
 

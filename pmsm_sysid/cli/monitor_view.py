@@ -19,7 +19,7 @@ from rich.console import Group, RenderableType
 from rich.table import Table
 from rich.text import Text
 
-from ..core.history import CHANGE_NAMES
+from ..core.online.history import CHANGE_NAMES
 
 UNITS = {"thrust": "N", "speed": "m/s", "position": "m"}
 TOP_TERMS = 4

@@ -148,7 +148,7 @@ def _check(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..app import build_pipeline, parse_nodes
-    from ..core.plant import load_plant
+    from ..core.physics.plant import load_plant
     from ..rosutil import stop_on_signals
     from .common import replace_bag_dir, write_json
     from .run_verdict import headline, verdict

@@ -65,8 +65,8 @@ def run(args: argparse.Namespace) -> int:
 
     from ..api.simulation import simulation_run
     from ..bagio import write_recording
-    from ..core.physics import effective_substeps
-    from ..core.plant import plant_to_dict
+    from ..core.physics.motor import effective_substeps
+    from ..core.physics.plant import plant_to_dict
     from ..progress import activity
     from ..validate import atomic_dir
     from .common import write_json

@@ -19,7 +19,7 @@ from rclpy.context import Context
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from ..core.history import RunHistory
+from ..core.online.history import RunHistory
 from ..topics import CHANGE, DEFAULT_NAMESPACE, MODEL, RIDGES, VALIDATION
 from .monitor import diagnostic_dicts
 

@@ -6,7 +6,7 @@ it). Subscribes to ``<ns>/model`` (std_msgs/String, the identify JSON of one win
 a bounded latest-wins queue (``queue_size``, default 1; a model replaced before it was
 analysed is counted as skipped); a worker thread passes it to a worker process of the node's
 own (parameter ``worker: process``, the default; ``thread`` analyses in the thread), which
-parses it and runs :func:`pmsm_sysid.core.gfrf_analysis.analyse_json` (H1 peaks, H2/H3
+parses it and runs :func:`pmsm_sysid.core.frequency.analysis.analyse_json` (H1 peaks, H2/H3
 ridges, poles, support by the excitation): off the executor and off its GIL, at a lower
 scheduling priority than the fits (an analysis may be skipped, a fit should not). A timer
 publishes finished results from the executor thread (layouts in :mod:`.gfrf_msgs`):
@@ -33,9 +33,9 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray, String
 
 from ..core.errors import DataError, GfrfError
-from ..core.fitqueue import FitWorker, LatestQueue
-from ..core.gfrf_message import MessageAnalyser, analyse_message
-from ..core.workerproc import ProcessWorker
+from ..core.frequency.message import MessageAnalyser, analyse_message
+from ..core.online.fitqueue import FitWorker, LatestQueue
+from ..core.online.workerproc import ProcessWorker
 from ..topics import DEFAULT_NAMESPACE, MODEL, RIDGE_FREQUENCIES, RIDGES, VALIDATION
 from .gfrf_msgs import ridges_message, validation_message
 from .health import HealthPublisher, gfrf_health

@@ -5,8 +5,8 @@ The node lives in the pipeline's namespace ``<ns>`` (default ``/pmsm``: node
 ``<ns>/thrust|speed|position`` or, with ``input_layout: joint_state``, to one
 ``sensor_msgs/JointState`` topic (``joint_state_topic``, default ``<ns>/joint_states``;
 ``effort``/``velocity``/``position`` of ``joint_name``). The work is done by
-:class:`pmsm_sysid.core.engine.OnlineEngine` (alignment,
-window ring, fitting thread) around :class:`pmsm_sysid.core.tracker.WindowTracker` (fits,
+:class:`pmsm_sysid.core.online.engine.OnlineEngine` (alignment,
+window ring, fitting thread) around :class:`pmsm_sysid.core.online.tracker.WindowTracker` (fits,
 cross-validation, change detection), which runs in a worker process of its own (parameter
 ``fit_worker: process``, the default; ``thread`` runs it in the engine's fitting thread);
 ``__init__`` only wires parameters, subscriptions,
@@ -38,13 +38,13 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from ..bagio.cdr import decode_stamped
-from ..core.engine import EngineConfig, OnlineEngine, WindowError
 from ..core.errors import DataError
-from ..core.gfrf_analysis import json_safe
-from ..core.inputs import InputReport, describe_inputs
-from ..core.online import Window
-from ..core.tracker import TrackerConfig, WindowResult, WindowTracker, tracker_config
-from ..core.workerproc import ProcessWorker
+from ..core.frequency.analysis import json_safe
+from ..core.online.engine import EngineConfig, OnlineEngine, WindowError
+from ..core.online.inputs import InputReport, describe_inputs
+from ..core.online.streaming import Window
+from ..core.online.tracker import TrackerConfig, WindowResult, WindowTracker, tracker_config
+from ..core.online.workerproc import ProcessWorker
 from ..rosutil import data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
 from ..topics import CHANGE, DEFAULT_NAMESPACE, INPUT_TYPES, MODEL, VALIDATION
 from .health import HealthPublisher, IdentifierHealth

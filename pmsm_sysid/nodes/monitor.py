@@ -18,7 +18,7 @@ from rclpy.context import Context
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, String
 
-from ..core.monitoring import SysIdView, TopicStats
+from ..core.online.monitoring import SysIdView, TopicStats
 from ..rosutil import data_qos, message_class, sample_value, stamp_to_ns
 from ..topics import (
     CHANGE,

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.errors import PmsmSysidError
-from ..core.workerproc import START_METHOD
+from ..core.online.workerproc import START_METHOD
 from ..topics import INPUT_TYPES, input_topic
 
 NODE_NAME = "pmsm_record"

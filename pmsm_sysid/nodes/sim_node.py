@@ -1,6 +1,6 @@
 """MotorSimNode: the simulated linear PMSM on ROS 2.
 
-Per sample k (exactly the order of :func:`pmsm_sysid.core.physics.simulate`, so the numbers
+Per sample k (exactly the order of :func:`pmsm_sysid.core.physics.motor.simulate`, so the numbers
 equal the offline simulation of the same plant and seed bit for bit):
 
 1. ``(speed, position) = sim.measure()``  — measured at t_k;
@@ -49,9 +49,9 @@ from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 
 from ..core.errors import ExcitationError, PmsmSysidError
-from ..core.excitation import DEFAULT_AMPLITUDE_N, EXCITATIONS, ExcitationSource
-from ..core.physics import MotorSimulator
-from ..core.plant import EFFECT_BLOCKS, Plant, nominal_plant, plant_from_dict, plant_to_dict
+from ..core.physics.excitation import DEFAULT_AMPLITUDE_N, EXCITATIONS, ExcitationSource
+from ..core.physics.motor import MotorSimulator
+from ..core.physics.plant import EFFECT_BLOCKS, Plant, nominal_plant, plant_from_dict, plant_to_dict
 from ..rosutil import data_qos, make_sample_messages, seconds_to_ns, stamp_from_ns
 from ..topics import DEFAULT_NAMESPACE, INPUT_TYPES, POSITION, SPEED, THRUST
 from .health import HealthPublisher, sim_health

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core.validation import CorrelationTest, CorrelationTests
+from ..core.validation.correlation import CorrelationTest, CorrelationTests
 from .base import Plot, new_figure, styled
 
 TITLES = {

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.errors import DataError, PmsmSysidError
-from ..core.identify import FitConfig
+from ..core.selection.identify import FitConfig
 from .html import Facts, Note, Section, write_page
 from .sink import Sink
 
@@ -65,7 +65,7 @@ class ReportResult:
 
 
 def _dump(obj: Any, path: Path) -> Path:
-    from ..core.gfrf_analysis import json_safe
+    from ..core.frequency.analysis import json_safe
 
     path.write_text(json.dumps(json_safe(obj), indent=2, allow_nan=False) + "\n")
     return path
@@ -94,7 +94,7 @@ def report_bag(bag: str | Path, out_dir: str | Path,
                options: ReportOptions | None = None) -> ReportResult:
     """Identify a recording (``options``), then report everything (module docstring)."""
     from ..bagio import read_recording
-    from ..core.identify import identify_recording
+    from ..core.selection.identify import identify_recording
 
     opt = options or ReportOptions()
     out = _prepare(out_dir)
@@ -116,8 +116,8 @@ def report_bag(bag: str | Path, out_dir: str | Path,
 
 def _identify(d: dict[str, Any], rec: Any, sink: Sink, files: tuple[Path, ...],
               what: str, why: str = "", before: tuple[Section, ...] = ()) -> ReportResult:
-    from ..core.gfrf_analysis import analyse_json
-    from ..core.model import NarxModel
+    from ..core.frequency.analysis import analyse_json
+    from ..core.terms.model import NarxModel
     from . import frequency, identify
 
     model = NarxModel.from_dict(d)

@@ -117,7 +117,7 @@ def rerun(d: Mapping[str, Any], json_path: Path) -> tuple[Any, str]:
     else (None, why not)."""
     from ..bagio import read_recording
     from ..core.discrepancy import DiagnoseOptions, diagnose
-    from ..core.plant import plant_from_dict
+    from ..core.physics.plant import plant_from_dict
 
     real = _find(d.get("real"), json_path)
     if real is None:

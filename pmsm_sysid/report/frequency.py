@@ -10,8 +10,8 @@ import numpy as np
 
 from .. import plots
 from ..core.errors import PmsmSysidError
-from ..core.gfrf import Gfrf
-from ..core.model import NarxModel
+from ..core.frequency.gfrf import Gfrf
+from ..core.terms.model import NarxModel
 from .html import Block, Facts, Note, Section, Table
 from .sink import Sink
 
@@ -69,7 +69,7 @@ def _excited(model_json: Mapping[str, Any] | None) -> list[tuple[float, float]] 
     """Where the estimation input has power (cycles/sample), when the JSON says: a narrow
     band around each tone of a tonal input (the stretch between tones holds no power), the
     band of most of the input's power otherwise."""
-    from ..core.identifiability import ExcitationSummary, tone_tolerance_hz
+    from ..core.selection.identifiability import ExcitationSummary, tone_tolerance_hz
 
     ex = (model_json or {}).get("excitation")
     if not ex:

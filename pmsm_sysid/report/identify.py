@@ -1,12 +1,12 @@
 """Report sections of one identification: signals, model, validation (Sections III-IV of Liu et al.
 (2005)).
 
-The identify JSON says which windows and model; the recording gives the
-series. Predictions and tests are recomputed here exactly as ``identify`` computes them
-(:func:`pmsm_sysid.core.identify.validate_narx`): each window is preceded by the structure's
-max lag of samples when the recording has them; the model's max lag L of samples start the
-free run (Eq. 12 of Liu et al. 2005) and the one-step-ahead residuals of rows L.. feed the tests
-(Eq. 13).
+The identify JSON says which windows and model; the recording gives the series. Predictions and
+tests are recomputed here exactly as ``identify`` computes them
+(:func:`pmsm_sysid.core.selection.identify.validate_narx`): each window is preceded by the
+structure's max lag of samples when the recording has them; the model's max lag L of samples
+start the free run (Eq. 12 of Liu et al. 2005) and the one-step-ahead residuals of rows L.. feed
+the tests (Eq. 13).
 """
 
 from __future__ import annotations
@@ -20,10 +20,10 @@ from numpy.typing import NDArray
 
 from .. import plots
 from ..core.errors import DataError
-from ..core.model import NarxModel
-from ..core.prediction import one_step_ahead, simulate
-from ..core.signals import Recording
-from ..core.validation import CorrelationTests, correlation_tests, welch_psd
+from ..core.recording.signals import Recording
+from ..core.terms.model import NarxModel
+from ..core.validation.correlation import CorrelationTests, correlation_tests, welch_psd
+from ..core.validation.prediction import one_step_ahead, simulate
 from .html import Block, Facts, Note, Section, Table
 from .sink import Sink
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from ..core.history import CHANGE_NAMES
+from ..core.online.history import CHANGE_NAMES
 from .html import Block, Facts, Note, Section, Table
 from .sink import Sink
 

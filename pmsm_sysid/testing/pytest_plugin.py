@@ -121,7 +121,7 @@ def sim_motor(ros_context: Any, ros_executor: Any) -> Iterator[Callable[..., Any
     def start(namespace: str = "/pmsm", excitation: str = "paper-speed", seed: int = 0,
               plant: Any = None, **options: Any) -> Any:
         if plant is not None and not hasattr(plant, "mass_kg"):
-            from ..core.plant import load_plant
+            from ..core.physics.plant import load_plant
 
             plant = load_plant(plant)
         suffix = "" if not nodes else f"_{len(nodes) + 1}"

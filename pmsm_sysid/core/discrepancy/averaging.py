@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from scipy.signal import lfilter
 from scipy.special import erf
 
-from ..plant import SIGN_SMOOTHING_MPS, Plant
+from ..physics.plant import SIGN_SMOOTHING_MPS, Plant
 
 FloatArray = NDArray[np.float64]
 
@@ -119,7 +119,7 @@ def sign_width(noise_std: float, base: float = SIGN_SMOOTHING_MPS) -> float:
 def interval_effects(plant: Plant, x: FloatArray, v: FloatArray, v_lo: FloatArray,
                      v_hi: FloatArray, force: FloatArray, period: float, mode: str,
                      noise_std: float) -> FloatArray:
-    """Interval means of :func:`pmsm_sysid.core.physics.effects_force` for ``plant``."""
+    """Interval means of :func:`pmsm_sysid.core.physics.motor.effects_force` for ``plant``."""
     total = np.zeros(len(x))
     cog = plant.cogging
     if cog is not None:

@@ -3,7 +3,7 @@
 Real axes (the EMPS rig among them) are recorded under position control, so the thrust is
 what a controller needed to follow a reference: friction, offsets and cogging are fought
 by the loop and barely show in the position, but they are all in the thrust. This module
-closes a PID loop around :class:`~pmsm_sysid.core.physics.MotorSimulator` with the recordings'
+closes a PID loop around :class:`~pmsm_sysid.core.physics.motor.MotorSimulator` with the recordings'
 timing: the controller reads position and speed at t_k and its output is held over
 [t_k, t_k+1). An optional ``disturbance`` force acts on the mover without being recorded
 (an unmodelled, unmeasured force).
@@ -18,9 +18,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import DataError
-from ..physics import MotorSimulator
-from ..plant import Plant, dump_plant
-from ..signals import Recording
+from ..physics.motor import MotorSimulator
+from ..physics.plant import Plant, dump_plant
+from ..recording.signals import Recording
 
 FloatArray = NDArray[np.float64]
 

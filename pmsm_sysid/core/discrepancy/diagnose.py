@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import DiagnoseError, PlantError, PmsmSysidError
-from ..plant import Plant
-from ..signals import Recording, check_finite
+from ..physics.plant import Plant
+from ..recording.signals import Recording, check_finite
 from .estimate import Fit, contributions, design, refine
 from .gfrf_compare import gfrf_where
 from .kinematics import (

@@ -11,10 +11,11 @@ would give a model whose GFRF ridges are numerical dust (−350 dB); with matche
 twin shows what the plant and the noise alone put into such a model.
 
 Each model's GFRFs (Eqs. 7-9 of Liu et al. 2005) are analysed by
-:func:`~pmsm_sysid.core.gfrf_analysis. analyse` (H1 peaks, H2 ridges, each judged ``supported`` by
-the estimation input or not). An H1 peak counts when it is supported and the measured speed stands
-``SNR_MIN_DB`` above the model's one-step residual at its frequency (where the speed is all noise,
-as at high frequencies under a position loop, a noise-fitted linear part has peaks anywhere). An H2
+:func:`~pmsm_sysid.core.frequency.analysis.analyse` (H1 peaks, H2 ridges, each judged
+``supported`` by the estimation input or not). An H1 peak counts when it is supported and the
+measured speed stands ``SNR_MIN_DB`` above the model's one-step residual at its frequency (where
+the speed is all noise, as at high frequencies under a position loop, a noise-fitted linear part
+has peaks anywhere). An H2
 ridge counts when it is supported and the model's nonlinear terms are **significant**: a
 prewhitened nested F-test of the nonlinear terms against the model's linear terms,
 Bonferroni-corrected for every subset of that many nonlinear candidates and every model
@@ -41,16 +42,16 @@ from numpy.typing import NDArray
 from scipy.signal import welch
 from scipy.special import gammaln
 
-from ..candidates import candidate_set
 from ..errors import PmsmSysidError
-from ..gfrf_analysis import GfrfAnalysis, analyse, nonlinear_err
-from ..identifiability import ExcitationSummary, excitation_summary
-from ..identify import FitConfig, NarxFit, fit_narx
-from ..model import NarxModel, Structure
-from ..physics import simulate
-from ..plant import Plant
-from ..regressors import lag_base, target, term_matrix
-from ..signals import Recording
+from ..frequency.analysis import GfrfAnalysis, analyse, nonlinear_err
+from ..physics.motor import simulate
+from ..physics.plant import Plant
+from ..recording.signals import Recording
+from ..selection.identifiability import ExcitationSummary, excitation_summary
+from ..selection.identify import FitConfig, NarxFit, fit_narx
+from ..terms.candidates import candidate_set
+from ..terms.model import NarxModel, Structure
+from ..terms.regressors import lag_base, target, term_matrix
 from .stats import nested_f_test
 
 FloatArray = NDArray[np.float64]

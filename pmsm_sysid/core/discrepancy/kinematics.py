@@ -1,7 +1,7 @@
 """Equation-error data: the force residual of inverse dynamics, parallel-filtered.
 
 The nominal plant says ``F_eff = M a + B v + F_effects(x, v, F_eff)`` (the sign convention of
-:mod:`pmsm_sysid.core.physics`), so the force residual ``r = F - M a - B v - F_effects`` is
+:mod:`pmsm_sysid.core.physics.motor`), so the force residual ``r = F - M a - B v - F_effects`` is
 exactly the force of whatever the plant leaves out. It needs the acceleration, which is the
 reason for the care below (the IDIM-LS practice of the EMPS benchmark):
 
@@ -36,8 +36,8 @@ from numpy.typing import NDArray
 from scipy.signal import butter, sosfiltfilt
 
 from ..errors import DiagnoseError
-from ..plant import SIGN_SMOOTHING_MPS, Plant
-from ..signals import Recording
+from ..physics.plant import SIGN_SMOOTHING_MPS, Plant
+from ..recording.signals import Recording
 from .averaging import interval_effects, interval_force, sign_width
 from .instruments import instrumented
 

@@ -1,7 +1,7 @@
 """The library of interpretable effects, with the names diagnose reports.
 
 Each effect is a force the nominal plant leaves out, written in the inverse-dynamics sign
-``F = M a + B v + F_effects`` of :mod:`pmsm_sysid.core.physics`, so a regressor's coefficient
+``F = M a + B v + F_effects`` of :mod:`pmsm_sysid.core.physics.motor`, so a regressor's coefficient
 is directly the effect's parameter:
 
 =====================  ==========================================  ==========================

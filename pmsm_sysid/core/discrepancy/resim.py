@@ -38,10 +38,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from ..physics import MotorSimulator
-from ..plant import Plant
-from ..signals import Recording
-from ..validation import fit_metrics
+from ..physics.motor import MotorSimulator
+from ..physics.plant import Plant
+from ..recording.signals import Recording
+from ..validation.correlation import fit_metrics
 
 FloatArray = NDArray[np.float64]
 

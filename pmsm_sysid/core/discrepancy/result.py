@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..plant import Plant, plant_to_dict
+from ..physics.plant import Plant, plant_to_dict
 from .locate import AxisFinding
 from .stats import HeldOutTest
 

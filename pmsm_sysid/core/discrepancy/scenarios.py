@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import DiagnoseError
-from ..excitation import make_excitation
-from ..physics import simulate
-from ..plant import (
+from ..physics.excitation import make_excitation
+from ..physics.motor import simulate
+from ..physics.plant import (
     Cogging,
     CoulombFriction,
     Noise,
@@ -27,7 +27,7 @@ from ..plant import (
     electrical_lag,
     nominal_plant,
 )
-from ..signals import Recording
+from ..recording.signals import Recording
 from .closed_loop import PositionLoop, reference_trajectory, run_closed_loop
 
 NOISE = Noise(speed_std=0.002, position_std=5e-6, force_std=1.0)

@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..plant import Plant
-from ..validation import correlation_tests
+from ..physics.plant import Plant
+from ..validation.correlation import correlation_tests
 from .estimate import Fit, contributions, design
 from .kinematics import EquationData
 from .locate import AxisFinding, scan_axes

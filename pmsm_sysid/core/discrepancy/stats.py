@@ -18,7 +18,7 @@ from scipy import stats
 from scipy.linalg import solve_toeplitz
 from scipy.signal import lfilter
 
-from ..validation import fit_metrics
+from ..validation.correlation import fit_metrics
 
 FloatArray = NDArray[np.float64]
 

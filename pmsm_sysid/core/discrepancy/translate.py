@@ -1,7 +1,7 @@
 """Fitted coefficients to the effect parameters diagnose reports (± standard errors) and plant
 blocks.
 
-Sign conventions follow :mod:`pmsm_sysid.core.physics` (``F = M a + B v + F_effects``):
+Sign conventions follow :mod:`pmsm_sysid.core.physics.motor` (``F = M a + B v + F_effects``):
 cogging ``A sin(2π x/p + φ)`` has regressor coefficients (A cos φ, A sin φ); thrust ripple
 ``-r sin(2π x/p + φ) F`` has (-r cos φ, -r sin φ). Amplitude and phase errors come from the
 coefficient covariance by the delta method; a pitch's from the wavenumber's (σ_p = p² σ_k).
@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..plant import (
+from ..physics.plant import (
     Cogging,
     CoulombFriction,
     ForceOffset,

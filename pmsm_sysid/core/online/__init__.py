@@ -1,0 +1,22 @@
+"""Online identification without ROS: stamp alignment of streamed samples, windows, the
+fit worker processes, the per-window tracker and the change detector behind ``run``.
+"""
+
+from .change import ChangeConfig, ChangeDecision, ChangeDetector
+from .engine import EngineConfig, EngineStats, OnlineEngine
+from .fitqueue import FitWorker, LatestQueue
+from .history import RunHistory
+from .inputs import InputAligner, InputReport
+from .livesim import simulated_windows
+from .monitoring import SysIdView, TopicStats
+from .streaming import Sample, StampAligner, Window, WindowScheduler
+from .tracker import TrackerConfig, WindowResult, WindowTracker
+from .workerproc import ProcessWorker, WorkerDied
+
+__all__ = [
+    "ChangeConfig", "ChangeDecision", "ChangeDetector", "EngineConfig", "EngineStats",
+    "FitWorker", "InputAligner", "InputReport", "LatestQueue", "OnlineEngine",
+    "ProcessWorker", "RunHistory", "Sample", "StampAligner", "SysIdView", "TopicStats",
+    "TrackerConfig", "Window", "WindowResult", "WindowScheduler", "WindowTracker",
+    "WorkerDied", "simulated_windows"
+]
