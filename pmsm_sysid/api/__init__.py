@@ -5,10 +5,10 @@ Modules: :mod:`.recordings` (bags), :mod:`.simulation`, :mod:`.identification`,
 """
 
 from ..core.errors import PmsmSysidError
-from ..core.gfrf_analysis import GfrfAnalysis
-from ..core.model import NarxModel
-from ..core.plant import Plant
-from ..core.signals import Recording
+from ..core.frequency.analysis import GfrfAnalysis
+from ..core.physics.plant import Plant
+from ..core.recording.signals import Recording
+from ..core.terms.model import NarxModel
 from .diagnosis import Diagnosis, diagnose
 from .frequency import gfrf
 from .identification import Identification, identify

@@ -1,4 +1,4 @@
-"""MonitorNode: subscribes to the package's topics and keeps :mod:`core.monitoring` stats.
+"""MonitorNode: subscribes to the package's topics and keeps :mod:`core.online.monitoring` stats.
 
 The node lives in the watched namespace ``<ns>`` (``<ns>/pmsm_monitor``) and subscribes to
 relative names, so it sees that pipeline only. Inputs (``<ns>/thrust|speed|position``) are
