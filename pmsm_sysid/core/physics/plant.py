@@ -10,6 +10,7 @@ writing ``null``, or ``enabled: false``.
 
 from __future__ import annotations
 
+import importlib.resources
 import typing
 from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, fields, is_dataclass, replace
@@ -346,7 +347,7 @@ def plant_to_dict(p: Plant) -> dict[str, Any]:
 
 def packaged_plant_path(name: str) -> Path:
     """Path of a plant file shipped in the package (``nominal`` = Table 1, effects off)."""
-    return Path(__file__).resolve().parent.parent / "data" / f"{name}.yaml"
+    return Path(str(importlib.resources.files("pmsm_sysid") / "data" / f"{name}.yaml"))
 
 
 def load_plant(path: str | Path) -> Plant:
