@@ -15,17 +15,19 @@ import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from conftest import EMPS_MAT
+from replay_helpers import (
+    assert_identify_verb_agrees,
+    assert_live_equals_offline,
+    replay_into_pipeline,
+)
 
 from pmsm_sysid.cli import main
-from pmsm_sysid.core.selection.identify import FitConfig, identify_recording
-from pmsm_sysid.core.terms.model import NarxModel, Structure
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 REPO = Path(__file__).resolve().parents[1]
@@ -39,34 +41,6 @@ def _slice(full: Path, out: Path) -> None:
     write_recording(out, rec.window(START, STOP))  # speed derived: no speed topic written
 
 
-def _replay_into_pipeline(bag: Path, env: dict[str, str], ctx: Any,
-                          record: Path) -> tuple[Any, ...]:
-    from pmsm_sysid.app import build_pipeline
-
-    n = STOP - START
-    with build_pipeline(["identifier", "gfrf"], context=ctx, record=str(record),
-                        identifier_params={"queue_size": 64},
-                        gfrf_params={"orders": [1], "queue_size": 64}) as pipe:
-        replay = subprocess.Popen(
-            # half its own pace: a subscriber starved for up to 2 s (a busy machine) still
-            # loses nothing from its queue of 1000 messages
-            [sys.executable, "-m", "pmsm_sysid.cli", "replay", str(bag), "--wait", "60",
-             "--subscribers", "2", "--rate", "0.5", "--json", "-"],
-            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        try:
-            deadline = time.monotonic() + 180
-            pipe.run(until=lambda: replay.poll() is not None or time.monotonic() > deadline)
-            pipe.run(until=lambda: pipe.identifier.engine.samples_received >= n
-                     or time.monotonic() > deadline)
-        finally:
-            if replay.poll() is None:
-                replay.kill()
-            out, err = replay.communicate()
-        assert replay.returncode == 0, err
-        pipe.finish()
-        return pipe.summary(), list(pipe.nodes["collector"].model_log), json.loads(out), err
-
-
 def test_emps_walkthrough_live_equals_offline(ros_context: Any, ros_env: int,
                                               tmp_path: Path) -> None:
     from pmsm_sysid.bagio import read_recording
@@ -78,7 +52,14 @@ def test_emps_walkthrough_live_equals_offline(ros_context: Any, ros_env: int,
     env = {**os.environ, "ROS_DOMAIN_ID": str(ros_env), "ROS_LOG_DIR": str(tmp_path / "log"),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     live = tmp_path / "live"
-    s, models, replayed, _ = _replay_into_pipeline(part, env, ros_context, live)
+    # half its own pace: a subscriber starved for up to 2 s (a busy machine) still loses
+    # nothing from its queue of 1000 messages
+    run = replay_into_pipeline(part, env, ros_context, STOP - START, record=str(live),
+                               replay_args=("--wait", "60", "--subscribers", "2", "--rate",
+                                            "0.5", "--json", "-"),
+                               identifier_params={"queue_size": 64},
+                               gfrf_params={"orders": [1], "queue_size": 64})
+    s, models, replayed = run.summary, run.models, json.loads(run.replay_out)
 
     # the replay says what it published and that the identifier listened
     assert replayed["topics"]["/pmsm/position"] == STOP - START
@@ -111,32 +92,14 @@ def test_emps_walkthrough_live_equals_offline(ros_context: Any, ros_env: int,
         b = a + m["window"]["n_samples"]
         assert rec.t[b - 1] == pytest.approx(m["window"]["end_stamp"], abs=1e-9)
         assert m["speed_derived"] is (m["output"] == "speed")
-        st = m["structure"]
-        cfg = FitConfig(structure=Structure(st["ny"], st["nu"], st["degree"], st["delay"]),
-                        method=m["method"])
-        ref = identify_recording(rec, output=m["output"], config=cfg, estimate=(a, b),
-                                 validate=None, form=m["form"]).to_dict()
-        assert [t["name"] for t in m["terms"]] == [t["name"] for t in ref["terms"]], m["model_id"]
-        got, want = NarxModel.from_dict(m), NarxModel.from_dict(ref)
-        np.testing.assert_allclose(got.estimates, want.estimates, rtol=1e-9, atol=0)
-        assert m["validation"]["estimation"]["r2"] == pytest.approx(
-            ref["validation"]["estimation"]["r2"], rel=1e-9)
+        assert_live_equals_offline(m, rec, a, b)
 
     # the identify verb on the last speed window, then diagnose on the whole recording
     last = max((m for m in models if m["output"] == "speed"),
                key=lambda m: m["window"]["end_stamp"])
     a = int(np.searchsorted(rec.t, last["window"]["start_stamp"] - 1e-7))
-    out = tmp_path / "identify.json"
-    proc = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "identify", str(part),
-                           "--estimate", f"{a}:{a + 1000}", "--no-validate", "--method",
-                           last["method"], "--json", str(out)],
-                          env=env, capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    cli = json.loads(out.read_text())
+    cli = assert_identify_verb_agrees(part, last, a, env, tmp_path / "identify.json")
     assert cli["speed_derived"] is True
-    assert [t["name"] for t in cli["terms"]] == [t["name"] for t in last["terms"]]
-    np.testing.assert_allclose([t["estimate"] for t in cli["terms"]],
-                               [t["estimate"] for t in last["terms"]], rtol=1e-9, atol=0)
     diag = tmp_path / "diag.json"
     proc = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "diagnose", "--plant",
                            str(REPO / "plants" / "emps.yaml"), "--real", str(full), "--json",

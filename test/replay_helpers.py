@@ -1,0 +1,89 @@
+"""Shared pieces of the live-equals-offline tests: replay a bag (its own process) into an
+in-process pipeline, and compare each live model with the offline fit of the same window."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from pmsm_sysid.core.selection.identify import FitConfig, identify_recording
+from pmsm_sysid.core.terms.model import NarxModel, Structure
+
+
+@dataclass(frozen=True)
+class Replayed:
+    summary: dict[str, Any]
+    models: list[dict[str, Any]]
+    ridges: dict[str, dict[str, Any]]
+    replay_out: str
+
+
+def replay_into_pipeline(bag: Path, env: dict[str, str], ctx: Any, n_samples: int, *,
+                         replay_args: tuple[str, ...] = (), deadline_s: float = 180,
+                         **pipeline: Any) -> Replayed:
+    """``replay BAG`` in its own process into identifier + GFRF nodes on ``ctx``; returns once
+    the replay ended and the identifier holds ``n_samples`` (completion conditions; the
+    deadline only stops a hung run)."""
+    from pmsm_sysid.app import build_pipeline
+
+    with build_pipeline(["identifier", "gfrf"], context=ctx, **pipeline) as pipe:
+        replay = subprocess.Popen(
+            [sys.executable, "-m", "pmsm_sysid.cli", "replay", str(bag), *replay_args],
+            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            deadline = time.monotonic() + deadline_s
+            pipe.run(until=lambda: replay.poll() is not None or time.monotonic() > deadline)
+            pipe.run(until=lambda: pipe.identifier.engine.samples_received >= n_samples
+                     or time.monotonic() > deadline)
+        finally:
+            if replay.poll() is None:
+                replay.kill()
+            out, err = replay.communicate()
+        assert replay.returncode == 0, err
+        pipe.finish()
+        collector = pipe.nodes["collector"]
+        return Replayed(pipe.summary(), list(collector.model_log),
+                        {r["model_id"]: r for r in collector.ridges_log}, out)
+
+
+def assert_live_equals_offline(model: dict[str, Any], rec: Any, a: int, b: int) -> dict[str, Any]:
+    """The live model of window [a, b) has the offline fit's terms, estimates, ERRs and R2
+    (to 1e-9); returns the offline fit's JSON."""
+    st = model["structure"]
+    cfg = FitConfig(structure=Structure(st["ny"], st["nu"], st["degree"], st["delay"]),
+                    method=model["method"])
+    ref = identify_recording(rec, output=model["output"], config=cfg, estimate=(a, b),
+                             validate=None, form=model["form"]).to_dict()
+    assert [t["name"] for t in model["terms"]] == [t["name"] for t in ref["terms"]], \
+        model["model_id"]
+    got, want = NarxModel.from_dict(model), NarxModel.from_dict(ref)
+    np.testing.assert_allclose(got.estimates, want.estimates, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(got.err, want.err, rtol=1e-9, atol=1e-15)
+    assert model["validation"]["estimation"]["r2"] == pytest.approx(
+        ref["validation"]["estimation"]["r2"], rel=1e-9)
+    return ref
+
+
+def assert_identify_verb_agrees(bag: Path, model: dict[str, Any], a: int, env: dict[str, str],
+                                out: Path) -> dict[str, Any]:
+    """``pmsm-sysid identify BAG --estimate a:a+n`` gives the live model's terms and
+    estimates; returns the verb's JSON."""
+    b = a + model["window"]["n_samples"]
+    proc = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "identify", str(bag),
+                           "--estimate", f"{a}:{b}", "--no-validate", "--method",
+                           model["method"], "--json", str(out)],
+                          env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    cli: dict[str, Any] = json.loads(out.read_text())
+    assert [t["name"] for t in cli["terms"]] == [t["name"] for t in model["terms"]]
+    np.testing.assert_allclose([t["estimate"] for t in cli["terms"]],
+                               [t["estimate"] for t in model["terms"]], rtol=1e-9, atol=0)
+    return cli
