@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Collection, Sequence
+from collections.abc import Callable, Collection, Sequence
 from typing import Any
 
 from ..core.errors import OptionError
@@ -27,26 +27,26 @@ def choice(name: str, value: Any, choices: Collection[Any]) -> Any:
     return value
 
 
-def fraction(name: str, value: Any) -> float:
-    """A number strictly between 0 and 1."""
+def _number(name: str, value: Any, ok: Callable[[float], bool], what: str) -> float:
+    """``value`` as a float for which ``ok`` holds, else an :class:`OptionError` naming ``what``."""
     try:
         x = float(value)
     except (TypeError, ValueError) as exc:
-        raise OptionError(f"{name} must be a number in (0, 1), got {value!r}") from exc
-    if not 0 < x < 1:
-        raise OptionError(f"{name} must be a number in (0, 1), got {value!r}")
+        raise OptionError(f"{name} must be {what}, got {value!r}") from exc
+    if not ok(x):
+        raise OptionError(f"{name} must be {what}, got {value!r}")
     return x
+
+
+def fraction(name: str, value: Any) -> float:
+    """A number strictly between 0 and 1."""
+    return _number(name, value, lambda x: 0 < x < 1, "a number in (0, 1)")
 
 
 def positive(name: str, value: Any) -> float:
     """A finite number > 0."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError) as exc:
-        raise OptionError(f"{name} must be a positive number, got {value!r}") from exc
-    if not (math.isfinite(x) and x > 0):
-        raise OptionError(f"{name} must be a positive finite number, got {value!r}")
-    return x
+    return _number(name, value, lambda x: math.isfinite(x) and x > 0,
+                   "a positive finite number")
 
 
 def sample_range(name: str, value: Any) -> tuple[int, int]:

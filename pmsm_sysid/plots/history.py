@@ -57,6 +57,17 @@ def _lines(ax: Any, hist: Mapping[str, Any], key: str, t0: float, style: str = "
     return drawn
 
 
+def _panel(hist: Mapping[str, Any], key: str, ylabel: str) -> tuple[Any, Any, float, Any]:
+    """One 8 x 3 in panel of ``key`` per output over time: (figure, axes, t0, lines drawn)."""
+    t0 = _t0(hist)
+    fig = new_figure(8.0, 3.0)
+    ax = fig.subplots()
+    drawn = _lines(ax, hist, key, t0)
+    ax.set_ylabel(ylabel)
+    ax.set_xlabel(XLABEL)
+    return fig, ax, t0, drawn
+
+
 @styled
 def fit_over_time(hist: Mapping[str, Any]) -> Plot:
     t0 = _t0(hist)
@@ -125,10 +136,7 @@ def h1_over_time(hist: Mapping[str, Any]) -> Plot:
 
 @styled
 def change_over_time(hist: Mapping[str, Any]) -> Plot:
-    t0 = _t0(hist)
-    fig = new_figure(8.0, 3.0)
-    ax = fig.subplots()
-    score = _lines(ax, hist, "change_score", t0)
+    fig, ax, t0, score = _panel(hist, "change_score", "change score S")
     thr = hist.get("change_threshold")
     data: dict[str, Any] = {"score": score, "threshold": None, "events": []}
     if thr is not None:
@@ -139,8 +147,6 @@ def change_over_time(hist: Mapping[str, Any]) -> Plot:
             ax.axvline(float(e["t"]) - t0, color="tab:purple", lw=1.5,
                        label="change event" if i == 0 else None)
             data["events"].append(float(e["t"]) - t0)
-    ax.set_ylabel("change score S")
-    ax.set_xlabel(XLABEL)
     ax.legend(loc="upper left")
     return Plot(fig, "run_change", "The change detector's combined score S per window; a "
                 "change is reported when S stays at or above the threshold on two windows in a "
@@ -154,10 +160,7 @@ def _skipped(rows: Sequence[Mapping[str, Any]], stride: int) -> list[int]:
 
 @styled
 def latency_over_time(hist: Mapping[str, Any]) -> Plot:
-    t0 = _t0(hist)
-    fig = new_figure(8.0, 3.0)
-    ax = fig.subplots()
-    latency = _lines(ax, hist, "fit_ms", t0)
+    fig, ax, t0, latency = _panel(hist, "fit_ms", "fit time (ms)")
     skipped: dict[str, list[int]] = {}
     for output, rows in hist["outputs"].items():
         skipped[output] = _skipped(rows, int((hist.get("stride") or {}).get(output, 1)))
@@ -166,8 +169,6 @@ def latency_over_time(hist: Mapping[str, Any]) -> Plot:
             seq, t = np.asarray(known).T
             ts = np.interp(skipped[output], seq, t) - t0  # between its neighbours in time
             ax.plot(ts, np.zeros(len(ts)), "x", color="tab:red", label=f"{output}: no model")
-    ax.set_ylabel("fit time (ms)")
-    ax.set_xlabel(XLABEL)
     ax.legend(loc="upper left")
     n = sum(len(v) for v in skipped.values())
     return Plot(fig, "run_latency", f"Fit time of each window's model; {n} window(s) with no "
