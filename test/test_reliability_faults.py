@@ -163,8 +163,8 @@ def test_record_stopped_by_a_signal_keeps_every_message_it_received(
     m = _assert_unbroken_prefix(got)
     # what it had committed before the signal is there (it drains what arrives after), and
     # nothing it was never sent
-    assert 3 * m >= committed >= 3 * 1.5 * RATE_HZ
-    assert m <= len(stream.sent_at)
+    assert sum(len(ks) for ks in got.values()) >= committed >= 3 * 1.5 * RATE_HZ
+    assert m >= 1.5 * RATE_HZ - 1 and max(len(ks) for ks in got.values()) <= len(stream.sent_at)
     assert sorted(p.name for p in bag.iterdir()) == ["metadata.yaml", "rec.db3"]
 
 
@@ -177,11 +177,14 @@ def test_record_hard_kill_leaves_a_readable_bag_missing_at_most_a_flush(
         ros_context, tmp_path, ros_env, signal.SIGKILL, 2.0)
     recorder.communicate(timeout=30)
     assert recorder.returncode == -signal.SIGKILL
-    m = _assert_unbroken_prefix(_recorded(bag))  # stock reader, no repair
+    got = _recorded(bag)                         # stock reader, no repair
+    m = _assert_unbroken_prefix(got)
     # everything committed before the kill is there (the recorder commits every second, so
-    # what a kill can cost is the last interval), and nothing was invented
-    assert 3 * m >= committed >= 3 * 2.0 * RATE_HZ
-    assert m <= stream.sent_before(t_kill + 0.1)
+    # what a kill can cost is the last interval), and nothing was invented; the topics of
+    # one sample may be split over a commit, so the count is of messages, not of samples
+    assert sum(len(ks) for ks in got.values()) >= committed >= 3 * 2.0 * RATE_HZ
+    assert max(len(ks) for ks in got.values()) <= stream.sent_before(t_kill + 0.1)
+    assert m >= 2.0 * RATE_HZ - 1
 
 
 # ------------------------------------------------------------------ the online identifier
