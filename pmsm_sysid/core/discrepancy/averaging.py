@@ -17,6 +17,7 @@ from scipy.signal import lfilter
 from scipy.special import erf
 
 from ..physics.plant import SIGN_SMOOTHING_MPS, Plant
+from .calibration import SpeedPrior, calibrated_friction
 
 FloatArray = NDArray[np.float64]
 
@@ -118,8 +119,9 @@ def sign_width(noise_std: float, base: float = SIGN_SMOOTHING_MPS) -> float:
 
 def interval_effects(plant: Plant, x: FloatArray, v: FloatArray, v_lo: FloatArray,
                      v_hi: FloatArray, force: FloatArray, period: float, mode: str,
-                     noise_std: float) -> FloatArray:
-    """Interval means of :func:`pmsm_sysid.core.physics.motor.effects_force` for ``plant``."""
+                     prior: SpeedPrior) -> FloatArray:
+    """Interval means of :func:`pmsm_sysid.core.physics.motor.effects_force` for ``plant``
+    (friction calibrated for the speed noise with ``prior``, :mod:`.calibration`)."""
     total = np.zeros(len(x))
     cog = plant.cogging
     if cog is not None:
@@ -131,11 +133,10 @@ def interval_effects(plant: Plant, x: FloatArray, v: FloatArray, v_lo: FloatArra
                 2 * math.pi * kappa * x + phase)
     cf, sf = plant.coulomb_friction, plant.stribeck_friction
     if cf is not None:
-        total += cf.amplitude_n * interval_friction(
-            v_lo, v_hi, sign_width(noise_std, cf.smoothing_mps))
+        total += cf.amplitude_n * calibrated_friction(prior, v_lo, v_hi, cf.smoothing_mps)
     if sf is not None:
-        total += sf.static_n * interval_friction(
-            v_lo, v_hi, sign_width(noise_std, sf.smoothing_mps), sf.velocity_mps)
+        total += sf.static_n * calibrated_friction(prior, v_lo, v_hi, sf.smoothing_mps,
+                                                   sf.velocity_mps)
     if plant.force_offset is not None:
         total += plant.force_offset.amplitude_n
     rip = plant.thrust_ripple

@@ -38,7 +38,8 @@ from scipy.signal import butter, sosfiltfilt
 from ..errors import DiagnoseError
 from ..physics.plant import SIGN_SMOOTHING_MPS, Plant
 from ..recording.signals import Recording
-from .averaging import interval_effects, interval_force, sign_width
+from .averaging import interval_effects, interval_force, interval_friction, sign_width
+from .calibration import SpeedPrior, calibrated_friction
 from .instruments import instrumented
 
 FloatArray = NDArray[np.float64]
@@ -247,6 +248,7 @@ class EquationData:
     sos: FloatArray
     speed_noise_mps: float = 0.0
     sign_smoothing_mps: float = SIGN_SMOOTHING_MPS
+    prior: SpeedPrior | None = None
 
     @property
     def n(self) -> int:
@@ -272,6 +274,16 @@ class EquationData:
             return q[:-1]
         out: FloatArray = 0.5 * (q[:-2] + q[1:-1])
         return out
+
+    def friction(self, stribeck_mps: float = 0.0) -> FloatArray:
+        """Interval means of sign(v) (or the Stribeck hump) given the smoothed speed:
+        calibrated with the speed's own distribution when known (:mod:`.calibration`),
+        else with the sign widened by the noise."""
+        if self.prior is None:
+            return interval_friction(self.v_lo, self.v_hi, self.sign_smoothing_mps,
+                                     stribeck_mps)
+        return calibrated_friction(self.prior, self.v_lo, self.v_hi, SIGN_SMOOTHING_MPS,
+                                   stribeck_mps)
 
     def forced(self, tau: float = 0.0, delay: float = 0.0) -> FloatArray:
         """Applied force at the equation instants for a lag/delay on the command."""
@@ -335,8 +347,9 @@ def equation_data(plant: Plant, rec: Recording, filt: FilterSpec | None = None,
     xs, vs, as_ = (sosfiltfilt(sos, s) for s in (x, v, a))
     v_lo, v_hi = _interval_ends(rec, mode, sos)
     noise = smoothed_speed_noise(rec, mode, sos)
+    prior = SpeedPrior.from_speeds(np.concatenate([v_lo, v_hi]), noise, SIGN_SMOOTHING_MPS)
     resid = force - inertial - interval_effects(plant, xs, vs, v_lo, v_hi, force, T, mode,
-                                                noise)
+                                                prior)
     t = rec.t[:-1] if mode == "speed" else rec.t[1:-1]
     y = np.ascontiguousarray(sosfiltfilt(sos, resid)[spec.edge:len(resid) - spec.edge:
                                                       spec.decimation])
@@ -347,7 +360,7 @@ def equation_data(plant: Plant, rec: Recording, filt: FilterSpec | None = None,
                         force=force,
                         y=y, t=t, period=T, mode=mode,
                         filt=spec, sos=sos, speed_noise_mps=noise,
-                        sign_smoothing_mps=sign_width(noise))
+                        sign_smoothing_mps=sign_width(noise), prior=prior)
 
 
 def thinned_times(data: EquationData) -> FloatArray:

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DiagnoseError
-from .averaging import interval_friction, travel_gain
+from .averaging import travel_gain
 from .kinematics import EquationData, thinned
 
 FloatArray = NDArray[np.float64]
@@ -92,10 +92,9 @@ def raw_columns(e: Effect, data: EquationData) -> FloatArray:
     if e.name == "force_offset":
         return np.ones((len(x), 1))
     if e.name == "coulomb_friction":
-        return interval_friction(data.v_lo, data.v_hi, data.sign_smoothing_mps)[:, None]
+        return data.friction()[:, None]
     if e.name == "stribeck_friction":
-        return interval_friction(data.v_lo, data.v_hi, data.sign_smoothing_mps,
-                                 e.velocity_mps)[:, None]
+        return data.friction(e.velocity_mps)[:, None]
     if e.name == "viscous_error":
         return data.v_iv[:, None]
     if e.name == "mass_error":

@@ -22,7 +22,6 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import BSpline
 
-from .averaging import interval_friction
 from .kinematics import EquationData, thinned, thinned_times
 from .stats import ar_whitener, lstsq, whiten
 
@@ -53,7 +52,7 @@ class AxisModel:
         vals = axis_values(data, self.axis)
         basis = _basis(np.clip(vals, self.lo, self.hi), self.lo, self.hi)
         if self.axis == "position_friction":
-            s = interval_friction(data.v_lo, data.v_hi, data.sign_smoothing_mps)
+            s = data.friction()
             basis = basis * s[:, None]
         return basis
 
