@@ -42,7 +42,7 @@ from .kinematics import (
     feedback_z,
     kinematic_mode,
 )
-from .library import Effect
+from .library import MIN_PERIODS, Effect, periods_seen
 from .modelling import Alternative, Model, confirmed_model
 from .nonparam import AxisModel
 from .result import Curves, DiagnoseResult, FoundEffect, capped
@@ -154,11 +154,14 @@ def _shares(fit: Fit, data: EquationData) -> list[float]:
     return out
 
 
-def _confidence(sig: float, held: Any, alt: Alternative | None, alpha: float) -> str:
-    """high: overwhelming on both data sets and no look-alike tie; moderate: significant
-    and significantly better on held-out data (or tied with a look-alike); low: otherwise."""
+def _confidence(sig: float, held: Any, alt: Alternative | None, alpha: float,
+                identified: bool = True) -> str:
+    """high: overwhelming on both data sets (the held-out recording included), no
+    look-alike tie and a shape the data can tell (a pitch met twice over the travel);
+    moderate: significant and significantly better on held-out data (or tied, or not
+    identified); low: otherwise."""
     tie = alt is not None and abs(alt.delta_chi2) < 3.84
-    if held is not None and held.p_value < 1e-3 and sig >= 10.0 and not tie:
+    if held is not None and held.p_value < 1e-3 and sig >= 10.0 and not tie and identified:
         return "high"
     if sig >= -np.log10(alpha) and (held is None or held.significant):
         return "moderate"
@@ -181,9 +184,14 @@ def _named(fit: Fit, data: EquationData, plant: Plant, held: list[Any],
             if abs(alt.delta_chi2) < 3.84:
                 notes.append(f"indistinguishable from {alt.name} in these data "
                              f"(Δχ² = {alt.delta_chi2:.2f} < 3.84)")
+        periods = periods_seen(e, data)
+        if periods < MIN_PERIODS:
+            notes.append(f"the travel covers {periods:.1f} periods of this pitch: no phase "
+                         "of it is met twice, so a smooth curve over position (a local "
+                         "force) explains it as well -- not identified as periodic")
         out.append(FoundEffect(e.name, params, std, sigs[k], shares[k], held[k],
-                               _confidence(sigs[k], held[k], alt, opts.alpha), tuple(notes),
-                               alt_d))
+                               _confidence(sigs[k], held[k], alt, opts.alpha,
+                                           periods >= MIN_PERIODS), tuple(notes), alt_d))
     return out
 
 
@@ -250,6 +258,8 @@ def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
     notes += replay_notes(table, [e.name for e in model.fit.effects])
     notes += [f"{e.label()} was significant on the estimation data but not confirmed on "
               "held-out data; it is not reported" for e in dropped]
+    found, capped_notes = cap_on_replay(found, table)
+    notes += capped_notes
     method = _method(segs, opts, n_tests, validate is not None)
     method["feedback"] = {"z": fb, "closed_loop": closed}
     gfrf = gfrf_where(plant, segs.recs["estimation"], opts.alpha) if opts.gfrf else None
@@ -261,6 +271,25 @@ def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
         ["nrmse_before"], fit=table, candidates=tuple(_rank_dict(s) for s in ranking),
         method=method, notes=tuple(notes), curves=_curves(segs, model.fit, replays),
         gfrf=gfrf)
+
+
+def cap_on_replay(found: list[FoundEffect], table: dict[str, Any],
+                  ) -> tuple[list[FoundEffect], list[str]]:
+    """No 'high' when the held-out recording, replayed through the corrected plant, comes
+    out significantly worse: 'high' needs the held-out data to agree at plant level too."""
+    oe = (table.get("validation") or {}).get("output_error")
+    if not oe or oe.get("verdict") != "worse":
+        return found, []
+    out, lowered = [], []
+    for e in found:
+        if e.confidence == "high":
+            lowered.append(e.name)
+            e = replace(e, confidence="moderate", notes=(*e.notes, (
+                "the corrected plant replays the held-out recording worse")))
+        out.append(e)
+    note = (f"{', '.join(lowered)}: confidence lowered to moderate -- the held-out "
+            "recording replays worse with the correction" if lowered else "")
+    return out, [note] if note else []
 
 
 def _cap(found: list[FoundEffect], curves: list[tuple[FoundEffect, AxisModel]],

@@ -45,6 +45,7 @@ OVERSAMPLE = 4  # grid points per independent wavenumber / Stribeck velocity
 MAX_CYCLE_HZ_FACTOR = 1.0  # a position period must pass the filter at the median speed
 CHUNK = 96  # columns filtered at a time (memory)
 MAX_PITCHES = 400
+MIN_PERIODS = 2.0  # periods over the travel for a position-periodic force to be told apart
 
 
 @dataclass(frozen=True)
@@ -137,6 +138,18 @@ class Family:
     name: str
     members: tuple[Effect, ...]
     n_independent: float
+
+
+def periods_seen(e: Effect, data: EquationData) -> float:
+    """How many periods of a cogging or ripple pitch the travel covers (inf otherwise).
+
+    With fewer than ``MIN_PERIODS`` no phase of the force is met twice: one period of a
+    sine (with harmonics) over the stroke is just a smooth curve over position -- a local
+    bump fits it as well -- so the data cannot say the force is periodic.
+    """
+    if e.name not in ("cogging", "thrust_ripple") or e.pitch_m <= 0:
+        return math.inf
+    return float(np.ptp(thinned(data, data.x))) / e.pitch_m
 
 
 def pitch_grid(data: EquationData) -> tuple[FloatArray, float]:

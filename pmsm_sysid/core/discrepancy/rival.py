@@ -7,7 +7,10 @@ axis (:mod:`.nonparam`; friction terms against a friction curve over position) t
 replaces it, both fitted on the estimation data with the other
 effects; if the curve predicts the held-out data significantly better, the library group
 was not the best explanation: its confidence is capped and the curve is reported as
-``unexplained``, with where it lives.
+``unexplained``, with where it lives. A tie keeps the library name -- unless the group
+holds a cogging or ripple whose pitch the travel does not cover twice (not identified as
+periodic, :func:`.library.periods_seen`): then the library must predict the held-out data
+significantly better than the curve to keep the axis.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from numpy.typing import NDArray
 
 from .estimate import Fit, contributions, design
 from .kinematics import EquationData
+from .library import MIN_PERIODS, periods_seen
 from .nonparam import AxisModel, fit_axis_with
 from .result import FoundEffect
 from .select import share_of
@@ -79,7 +83,10 @@ def rivals(fit: Fit, est: EquationData, val: EquationData, thrust: bool,
         best = _fit(fit, keep, est, val, kind)
         held = held_out_test(e_lib, best[2])
         axis = kind.split("_")[0]
-        if held.significant and best[3] > -math.log10(alpha):
+        unidentified = any(periods_seen(fit.effects[k], est) < MIN_PERIODS for k in group)
+        wins = held.significant or (unidentified and held.z > 0.0
+                                    and not held_out_test(best[2], e_lib).significant)
+        if wins and best[3] > -math.log10(alpha):
             rest = tuple(fit.effects[k] for k in keep)
             X, fixed = design(rest, est)
             share = share_of(est.y - fixed, X, est.project(best[0].raw(est)))
@@ -96,6 +103,6 @@ def as_found(r: Rival) -> FoundEffect:
     """The rival curve as an ``unexplained`` entry."""
     return FoundEffect(
         "unexplained", {"axis": r.axis, **r.model.describe()}, {}, r.significance, r.share,
-        r.held, "moderate",
+        r.held, "moderate" if r.held.significant else "low",
         (f"a curve over {r.axis} predicts held-out data better than "
          f"{', '.join(r.replaced)} (held-out MSE -{r.held.reduction:.0%}, z={r.held.z:.1f})",))
