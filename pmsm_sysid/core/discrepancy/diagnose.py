@@ -242,12 +242,12 @@ def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
     final, held = _prune(final, fdata, held, n_tests, opts.alpha)
     found = _named(final, fdata, plant, list(held), model.alternatives, n_tests, opts)
     curves = scan_unexplained(final, fdata, opts.alpha, opts.min_share,
-                              (model.fit, segs.est), segs.val, False)  # no thrust axis:
-    # a thrust sensor's noise is in both the residual and the recorded thrust, so the
-    # residual always bends over the thrust; over thrust only the rivals judge (held-out)
+                              (model.fit, segs.est), segs.val, closed)
     rv = rivals(model.fit, segs.est, segs.val, not closed, opts.alpha)
     found = _cap(found, curves, rv)
     beaten = {r.axis for r in rv}
+    unconfirmed = [e for e, _ in curves if e.held_out is not None and not e.held_out.confirmed]
+    curves = [(e, m) for e, m in curves if e.held_out is None or e.held_out.confirmed]
     found += [e for e, _ in curves if e.params.get("axis") not in beaten]
     found += [as_found(r) for r in rv]
     extra = _best_curve(curves)
@@ -258,6 +258,9 @@ def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
     notes += replay_notes(table, [e.name for e in model.fit.effects])
     notes += [f"{e.label()} was significant on the estimation data but not confirmed on "
               "held-out data; it is not reported" for e in dropped]
+    notes += [f"structure over {e.params['axis']} was significant on the estimation data, "
+              "but its curve does not lower the held-out error; it is not reported"
+              for e in unconfirmed]
     found, capped_notes = cap_on_replay(found, table)
     notes += capped_notes
     method = _method(segs, opts, n_tests, validate is not None)

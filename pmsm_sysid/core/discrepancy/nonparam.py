@@ -3,13 +3,22 @@
 When the final model's residual is still structured on an axis, the force it leaves out is
 modelled without naming it, as a cubic B-spline of the axis variable (position, velocity or
 the thrust command), or over position times sign(v) (a friction that depends on where the
-mover is), or -- over time -- as one slow sinusoid at the residual's strongest line (a
-periodic disturbance; a spline over time would not carry over to other data). The curve's
+mover is), or as one Gaussian bump over position (a local force: one column, its centre
+and width scanned by :mod:`.local`, so that a small force at one place of the stroke is
+not lost in the noise of seventeen coefficients), or -- over time -- as one slow sinusoid
+at the residual's strongest line (a periodic disturbance; a spline over time would not
+carry over to other data). The curve's
 columns go through the same parallel filter as every regressor and are fitted with the
 library model's columns; it is then judged like an effect: on held-out data, with its
 estimation coefficients. Where it lives is read off the curve: the region around its
-largest excursion from its median level (position, velocity) or around its steepest rise
-(thrust: a dead zone or a saturation is a turn of the curve).
+largest excursion from its median level (position, velocity) or where its slope departs
+most from its typical slope (thrust: a dead zone or a saturation is a turn of the curve).
+
+Under feedback the curve over thrust is fitted with a straight line over thrust beside it
+(``line``) and judged against that line alone: the loop makes the thrust answer the sensor
+noise and the process force, which are in the residual too, so the residual leans on the
+thrust in a straight line whatever the plant (errors in variables); only a bend in the
+curve -- a dead zone, a saturation -- is the plant's.
 """
 
 from __future__ import annotations
@@ -30,7 +39,8 @@ FloatArray = NDArray[np.float64]
 N_INTERVALS = 14
 DEGREE = 3
 UNITS = {"position": "m", "velocity": "m/s", "thrust": "N", "time": "s",
-         "position_friction": "m"}
+         "position_friction": "m", "position_local": "m"}
+FWHM = 2.0 * math.sqrt(2.0 * math.log(2.0))  # full width at half maximum of a Gaussian / σ
 
 
 @dataclass(frozen=True)
@@ -43,12 +53,18 @@ class AxisModel:
     coef: FloatArray
     cov: FloatArray
     freq_hz: float = 0.0
+    line: float | None = None  # a straight line over thrust fitted with the curve ...
+    line0: float = 0.0  # ... and fitted alone
+    inner: tuple[float, float] | None = None  # 5-95 % of the axis values (thrust turns)
+    bump: tuple[float, float] = (0.0, 0.0)  # position_local: centre and σ (m)
 
     def raw(self, data: EquationData) -> FloatArray:
         """Full-rate columns on ``data`` (values clipped to the fitted range)."""
         if self.axis == "time":
             tt = 2.0 * math.pi * self.freq_hz * data.t
             return np.column_stack([np.sin(tt), np.cos(tt)])
+        if self.axis == "position_local":
+            return bump_column(data.x, *self.bump)[:, None]
         vals = axis_values(data, self.axis)
         basis = _basis(np.clip(vals, self.lo, self.hi), self.lo, self.hi)
         if self.axis == "position_friction":
@@ -57,9 +73,28 @@ class AxisModel:
         return basis
 
     def force(self, data: EquationData) -> FloatArray:
-        """The modelled force at the regression samples of ``data``."""
+        """The modelled force at the regression samples of ``data`` (with the line)."""
         out: FloatArray = data.project(self.raw(data)) @ self.coef
+        if self.line is not None:
+            out = out + self.line * data.project(data.force)
         return out
+
+    def baseline(self, data: EquationData) -> FloatArray:
+        """The force of the line fitted alone (zero without one): the curve's rival."""
+        if self.line is None:
+            return np.zeros(data.n)
+        out: FloatArray = self.line0 * data.project(data.force)
+        return out
+
+    def _describe_bump(self) -> dict[str, Any]:
+        c, sig = self.bump
+        amp = float(self.coef[0])
+        at = np.linspace(c - 3 * sig, c + 3 * sig, 15)
+        half = 0.5 * FWHM * sig
+        return {"model": "Gaussian bump over position (a local force)",
+                "region": [c - half, c + half], "peak_at": c, "peak_n": amp,
+                "width": 2 * half, "sigma_m": sig, "unit": "m",
+                "curve": {"at": at.tolist(), "force_n": (amp * bump_column(at, c, sig)).tolist()}}
 
     def describe(self) -> dict[str, Any]:
         """Where the curve lives: region, peak and a coarse table of the curve."""
@@ -67,10 +102,15 @@ class AxisModel:
             amp = float(np.hypot(*self.coef))
             return {"model": "sinusoid over time", "frequency_hz": self.freq_hz,
                     "amplitude_n": amp, "period_s": 1.0 / max(self.freq_hz, 1e-12), "unit": "s"}
+        if self.axis == "position_local":
+            return self._describe_bump()
         grid = np.linspace(self.lo, self.hi, 201)
-        g = _basis(grid, self.lo, self.hi) @ self.coef
+        g = _basis(grid, self.lo, self.hi) @ self.coef + (self.line or 0.0) * grid
         rel = g - float(np.median(g))
-        score = np.abs(np.gradient(g, grid)) if self.axis == "thrust" else np.abs(rel)
+        if self.axis == "thrust":
+            score = _rise(grid, g, self.inner or (self.lo, self.hi))
+        else:
+            score = np.abs(rel)
         k = int(np.argmax(score))
         inside = score >= 0.5 * score[k]
         a = b = k
@@ -86,6 +126,25 @@ class AxisModel:
                 "peak_n": float(rel[k]), "width": float(grid[b] - grid[a]),
                 "unit": UNITS[self.axis],
                 "curve": {"at": grid[pick].tolist(), "force_n": g[pick].tolist()}}
+
+
+def bump_column(x: FloatArray, centre: float, sigma: float) -> FloatArray:
+    """exp(-(x - centre)² / 2σ²): a force at one place of the stroke."""
+    out: FloatArray = np.exp(-0.5 * ((np.asarray(x) - centre) / sigma) ** 2)
+    return out
+
+
+def _rise(grid: FloatArray, g: FloatArray, inner: tuple[float, float]) -> FloatArray:
+    """How much steeper than its typical slope the curve rises (a dead zone's turn), over
+    the knot spacing (the spline's own resolution) and among the values often met."""
+    h = (grid[-1] - grid[0]) / N_INTERVALS
+    slope = (np.interp(grid + h / 2, grid, g) - np.interp(grid - h / 2, grid, g)) / h
+    core = (grid >= inner[0]) & (grid <= inner[1])
+    if not core.any():
+        core = np.ones(len(grid), dtype=bool)
+    out: FloatArray = np.where(core, np.maximum(slope - float(np.median(slope[core])), 0.0),
+                               0.0)
+    return out
 
 
 def axis_values(data: EquationData, axis: str) -> FloatArray:
@@ -119,25 +178,45 @@ def _slow_line(r: FloatArray, t: FloatArray) -> float:
     return best[1]
 
 
-def fit_axis(data: EquationData, y: FloatArray, base: FloatArray, axis: str) -> AxisModel:
+def fit_axis(data: EquationData, y: FloatArray, base: FloatArray, axis: str,
+             line: bool = False) -> AxisModel:
     """Fit the curve of ``axis`` to ``y`` together with the columns ``base``."""
-    return fit_axis_with(data, y, base, axis)[0]
+    return fit_axis_with(data, y, base, axis, line)[0]
 
 
-def fit_axis_with(data: EquationData, y: FloatArray, base: FloatArray,
-                  axis: str) -> tuple[AxisModel, FloatArray, float]:
-    """The curve, the coefficients of ``base`` fitted with it, and the residual energy."""
+def fit_axis_with(data: EquationData, y: FloatArray, base: FloatArray, axis: str,
+                  line: bool = False, freq_hz: float = 0.0,
+                  ) -> tuple[AxisModel, FloatArray, float]:
+    """The curve, the coefficients of ``base`` fitted with it, and the residual energy.
+
+    ``line`` (thrust only): a straight line over thrust is fitted beside the curve and
+    kept in the model (module doc); its coefficient without the curve is kept too.
+    ``freq_hz`` (time only): the sinusoid's frequency when known (a spectral line), else
+    the strongest slow line.
+    """
+    m = base.shape[1]
+    line0 = None
+    if line and axis == "thrust":
+        base = np.hstack([base, data.project(data.force)[:, None]])
+        line0 = float(lstsq(base, y)[0][m])
     if axis == "time":
         _, r = lstsq(base, y)
-        freq = _slow_line(r, thinned_times(data))
+        freq = freq_hz if freq_hz > 0 else _slow_line(r, thinned_times(data))
         model = AxisModel(axis, 0.0, 0.0, np.zeros(2), np.eye(2), freq)
+    elif axis == "position_local":
+        from .local import best_bump  # the scan builds on this module's columns
+
+        c, sig = best_bump(data, y, base) or (0.0, 1.0)
+        model = AxisModel(axis, c - 3 * sig, c + 3 * sig, np.zeros(1), np.eye(1),
+                          bump=(c, sig))
     else:
         vals = thinned(data, axis_values(data, axis))
         lo, hi = float(np.quantile(vals, 0.005)), float(np.quantile(vals, 0.995))
         if hi <= lo:
             hi = lo + 1e-9
+        q5, q95 = (float(q) for q in np.quantile(vals, [0.05, 0.95]))
         model = AxisModel(axis, lo, hi, np.zeros(N_INTERVALS + DEGREE),
-                          np.eye(N_INTERVALS + DEGREE))
+                          np.eye(N_INTERVALS + DEGREE), inner=(q5, q95))
     cols = data.project(model.raw(data))
     X = np.hstack([base, cols])
     beta, r = lstsq(X, y)
@@ -146,6 +225,8 @@ def fit_axis_with(data: EquationData, y: FloatArray, base: FloatArray,
     rw = whiten(poly, r)
     s2 = float(rw @ rw) / max(1, len(rw) - X.shape[1])
     cov = s2 * np.linalg.pinv(Xw.T @ Xw)
-    m = base.shape[1]
-    return (AxisModel(axis, model.lo, model.hi, beta[m:], cov[m:, m:], model.freq_hz),
+    k = base.shape[1]
+    return (AxisModel(axis, model.lo, model.hi, beta[k:], cov[k:, k:], model.freq_hz,
+                      None if line0 is None else float(beta[m]), line0 or 0.0, model.inner,
+                      model.bump),
             beta[:m], float(r @ r))
