@@ -106,6 +106,7 @@ class DiagnoseResult:
                          + (" in the library" if self.effects else ""))
         for e in self.effects:
             lines.append(_effect_line(e))
+            lines += [f"    note: {n}" for n in e.notes]
         for seg in ("estimation", "validation"):
             f = self.fit.get(seg)
             if f:
