@@ -153,11 +153,7 @@ class RecorderNode(Node):
         for _ in range(DRAIN_ROUNDS):
             took = False
             for topic, msgtype, sub in self._subs:
-                with sub.handle:
-                    got = sub.handle.take_message(sub.msg_type, True)
-                if got is not None:
-                    self._store(topic, msgtype, got[0], got[1])
-                    took = True
+                took = self._take_one(topic, msgtype, sub) is not None or took
             if not took:
                 return
 
@@ -171,16 +167,20 @@ class RecorderNode(Node):
         """
         stored = 0
         for topic, msgtype, sub in self._subs:
-            while True:
-                with sub.handle:
-                    got = sub.handle.take_message(sub.msg_type, True)
-                if got is None:
-                    break
-                self._store(topic, msgtype, got[0], got[1])
+            while (info := self._take_one(topic, msgtype, sub)) is not None:
                 stored += 1
-                if int(got[1].get("received_timestamp") or 0) > stop_ns:
+                if int(info.get("received_timestamp") or 0) > stop_ns:
                     break
         return stored
+
+    def _take_one(self, topic: str, msgtype: str, sub: Any) -> Any:
+        """Store the next message waiting on ``sub``; its message info, or None if none."""
+        with sub.handle:
+            got = sub.handle.take_message(sub.msg_type, True)
+        if got is None:
+            return None
+        self._store(topic, msgtype, got[0], got[1])
+        return got[1]
 
     def summary(self) -> dict[str, Any]:
         """Messages per topic, and the stamp gaps and samples missing per input topic."""
