@@ -136,6 +136,42 @@ def test_scale_floors_apply() -> None:
     assert b.z(4.0, True) == pytest.approx(-2.0)
 
 
+def test_a_baseline_scores_nothing_before_it_holds_three_values() -> None:
+    """A feature observed only under some inputs has no reference at first: no z-score."""
+    b = RobustBaseline(10)
+    assert math.isnan(b.z(1.0, False)) and math.isnan(b.z(1.0, True))
+    assert b.z(math.inf, True) == math.inf  # a diverged free run still counts
+    for v in (1.0, 2.0):
+        b.add(v)
+    assert math.isnan(b.z(5.0, True))
+    b.add(3.0)
+    assert b.z(5.0, True) > 0
+
+
+def test_harmonic_content_is_observed_only_when_the_input_has_none_there() -> None:
+    """Under a tone the output's harmonics are the plant's; under APRBS or PRBS they are the
+    input's own (each window's differ), so the feature is left out."""
+    from pmsm_sysid.core.online.tracker import (
+        INPUT_HARMONICS_MAX_DB,
+        harmonics_db,
+        plant_harmonics_db,
+    )
+    from pmsm_sysid.core.physics.excitation import make_excitation
+
+    k = np.arange(1000)
+    tone = 10.0 * np.sin(2 * np.pi * 16.5 / 500 * k)
+    distorted = 0.03 * tone + 1e-3 * np.sin(2 * np.pi * 33.0 / 500 * k)
+    got = plant_harmonics_db(distorted, tone)
+    assert got == pytest.approx(harmonics_db(distorted, 16.5 / 500))
+    assert got == pytest.approx(20 * math.log10(1e-3 / 0.3), abs=0.1)
+    for kind in ("aprbs", "prbs", "multisine", "broadband"):
+        u = make_excitation(kind, 20000, 500.0, seed=0)
+        for stop in range(1000, 20001, 1000):
+            w = u[stop - 1000:stop]
+            assert math.isnan(plant_harmonics_db(w, w)), (kind, stop)
+    assert INPUT_HARMONICS_MAX_DB <= -40.0
+
+
 def test_jaccard_closed_forms() -> None:
     assert jaccard_distance(["a", "b", "c"], ["b", "c", "d"]) == pytest.approx(0.5)
     assert jaccard_distance([], []) == 0.0 and jaccard_distance(["a"], ["b"]) == 1.0

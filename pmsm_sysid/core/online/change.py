@@ -43,6 +43,7 @@ from numpy.typing import NDArray
 from ..errors import DataError
 
 MAD_TO_SIGMA = 1.4826
+MIN_REFERENCE = 3  # values a baseline needs before it scores anything
 
 
 @dataclass(frozen=True)
@@ -122,10 +123,14 @@ class RobustBaseline:
 
     def z(self, value: float, one_sided: bool) -> float:
         """Robust z-score of ``value`` (signed excess for one-sided features, else |z|);
-        +inf for a non-finite one-sided value, NaN for a non-finite two-sided one."""
-        med, scale = self.centre_scale()
+        +inf for a non-finite one-sided value, NaN for a non-finite two-sided one, and NaN
+        while fewer than :data:`MIN_REFERENCE` values are held (a feature observed only under
+        some inputs, e.g. the harmonic content, has no reference yet)."""
         if not math.isfinite(value):
             return math.inf if one_sided else math.nan
+        if len(self._values) < MIN_REFERENCE:
+            return math.nan
+        med, scale = self.centre_scale()
         d = (value - med) / scale
         return d if one_sided else abs(d)
 
