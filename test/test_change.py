@@ -172,6 +172,23 @@ def test_harmonic_content_is_observed_only_when_the_input_has_none_there() -> No
     assert INPUT_HARMONICS_MAX_DB <= -40.0
 
 
+def test_the_fit_error_has_one_scale_for_the_run() -> None:
+    """The own-fit feature is the free-run RMS error over the first window's output spread:
+    a window whose output swings less (another stretch of an APRBS) with the same error,
+    the plant's noise, scores the same."""
+    from pmsm_sysid.core.online.tracker import WindowTracker, tracker_config
+    from pmsm_sysid.nodes.identifier_node import DEFAULTS
+
+    track = WindowTracker(tracker_config(DEFAULTS))._tracks["speed"]
+    wide, narrow = np.array([-2.0, 2.0] * 50), np.array([-1.0, 1.0] * 50)
+    fit = WindowTracker._fit_error
+    ok = {"free_run_diverged": False}
+    assert fit(track, wide, {**ok, "nrmse": 0.01}) == pytest.approx(0.01)
+    assert fit(track, narrow, {**ok, "nrmse": 0.02}) == pytest.approx(0.01)  # same RMS error
+    assert fit(track, narrow, {**ok, "nrmse": None}) == math.inf
+    assert fit(track, narrow, {"free_run_diverged": True, "nrmse": 0.02}) == math.inf
+
+
 def test_jaccard_closed_forms() -> None:
     assert jaccard_distance(["a", "b", "c"], ["b", "c", "d"]) == pytest.approx(0.5)
     assert jaccard_distance([], []) == 0.0 and jaccard_distance(["a"], ["b"]) == 1.0

@@ -29,7 +29,9 @@ samples before a feeding the lags, exactly as ``identify --estimate a:b`` does):
    excitation (a chirp elsewhere in its sweep) is ``unjudged`` without breaking the run of
    comparable windows: under a 10 s chirp the detector compares the windows at the same
    phase of the sweep, 10 s apart. The features: the new model's
-   free-run NRMSE on its own window (a window spanning a change fits worse); the
+   free-run RMS error on its own window, over the output's std in the first window fitted
+   (one scale: the output's own spread follows the window's input; a window spanning a
+   change fits worse); the
    out-of-sample error of the previous window's model on the ``hop`` newest samples (free
    run over the window, NRMSE of the new samples);
    the gain and phase of the new model's H1 (Eq. 7 of Liu et al. 2005) at the reference excitation
@@ -211,6 +213,7 @@ class _OutputTrack:
         self.ref_freq: float | None = None
         self.ref_phase: float | None = None
         self.ref_spectrum: FloatArray | None = None
+        self.ref_spread: float | None = None  # output std over the first window fitted
         self.r2: deque[float] = deque(maxlen=tc.change.baseline)
         self.held: deque[_Held] = deque(maxlen=max_held)
 
@@ -371,13 +374,30 @@ class WindowTracker:
         if track.ref_phase is None and math.isfinite(feats["h1_phase_rad"]):
             track.ref_phase = feats["h1_phase_rad"]
         feats["h1_phase_rad"] = wrap_phase(feats["h1_phase_rad"] - (track.ref_phase or 0.0))
-        feats["harmonics_db"] = plant_harmonics_db(y[len(y) - len(u_win):], u_win)
-        nrmse = est["nrmse"]
-        feats["fit_nrmse"] = math.inf if nrmse is None or est["free_run_diverged"] else nrmse
+        y_win = y[len(y) - len(u_win):]
+        feats["harmonics_db"] = plant_harmonics_db(y_win, u_win)
+        feats["fit_nrmse"] = self._fit_error(track, y[model.max_lag:], est)
         if track.previous is not None and track.previous_stop == w.stop_index - self.config.hop:
             feats["xval_nrmse"] = newest_error(track.previous, y, u, self.config.hop)
             feats["term_jaccard"] = jaccard_distance(model.term_names, track.previous.term_names)
         return feats
+
+
+    @staticmethod
+    def _fit_error(track: _OutputTrack, y_run: FloatArray, est: Mapping[str, Any]) -> float:
+        """The model's free-run RMS error on its own window (``y_run``: the samples its
+        free-run NRMSE ``est`` was taken over) over the output's std in the first window
+        fitted (one scale for the run), not this window's: the error of a good model is the
+        response to the plant's noise, the same in every window, while the output's spread
+        follows the window's input (under APRBS, +-40 % from window to window). Inf if the
+        free run diverged."""
+        nrmse = est["nrmse"]
+        if nrmse is None or est["free_run_diverged"]:
+            return math.inf
+        spread = float(np.std(y_run))
+        if track.ref_spread is None:
+            track.ref_spread = spread
+        return float(nrmse) * spread / track.ref_spread if track.ref_spread > 0 else math.nan
 
 
 def dominant_frequency(u: FloatArray) -> float:
