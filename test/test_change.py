@@ -172,6 +172,43 @@ def test_harmonic_content_is_observed_only_when_the_input_has_none_there() -> No
     assert INPUT_HARMONICS_MAX_DB <= -40.0
 
 
+def test_after_a_change_the_old_spread_bounds_the_scale_until_the_baseline_is_full() -> None:
+    """A few windows of warm-up show only part of the excitation's window-to-window spread:
+    the spread from before the change stays a floor of the scale until the baseline is full."""
+    b = RobustBaseline(10)
+    for v in (1.0, 3.0, 5.0, 7.0, 9.0, 2.0, 4.0, 6.0, 8.0, 10.0):
+        b.add(v)
+    old = b.centre_scale()[1]
+    b.clear(keep_spread=True)
+    for _ in range(9):
+        b.add(20.0)
+        assert b.centre_scale() == (20.0, old)
+    b.add(20.0)  # full again: its own scale (here the 1e-300 guard) rules
+    assert b.centre_scale()[1] < 1e-200
+    b.clear()  # a restart forgets the spread too
+    for _ in range(3):
+        b.add(20.0)
+    assert b.centre_scale()[1] < 1e-200
+
+
+def test_the_detector_keeps_the_spread_across_a_change() -> None:
+    stream = _stream(160, 9)
+    for f in stream[100:]:
+        f["gain_db"] -= 5.0
+    det = ChangeDetector(FEATURES, ChangeConfig(baseline=24, warmup=8, holdoff=3))
+    scale = 0.0
+    for i, f in enumerate(stream):
+        if det.update(i, f).changed:
+            break
+        scale = det._base["gain_db"].centre_scale()[1]
+    k = i
+    for i in range(k + 1, k + 1 + 3 + 8):  # settling, then learning
+        det.update(i, stream[i])
+    assert det._base["gain_db"].centre_scale()[1] >= scale
+    assert det._base["gain_db"].centre_scale()[0] == pytest.approx(
+        np.median([f["gain_db"] for f in stream[k + 4:k + 12]]))
+
+
 def test_the_fit_error_has_one_scale_for_the_run() -> None:
     """The own-fit feature is the free-run RMS error over the first window's output spread:
     a window whose output swings less (another stretch of an APRBS) with the same error,

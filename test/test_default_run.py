@@ -96,7 +96,7 @@ def test_the_default_run_is_true_of_the_motor_and_quiet() -> None:
 
 @pytest.mark.slow
 @pytest.mark.timeout(1200)  # CPU-bound, as above
-@pytest.mark.parametrize("excitation", ["broadband", "paper-speed"])
+@pytest.mark.parametrize("excitation", ["broadband", "paper-speed", "aprbs"])
 def test_no_false_alarm_on_the_stationary_default_motor(excitation: str) -> None:
     """One minute of data (about 220 judged windows per output) of the default plant; the
     hour-long figures are bench/change_false_alarms.py's."""
@@ -119,6 +119,24 @@ def test_a_real_change_is_reported_on_both_outputs(excitation: str, kind: str) -
     for output in ("speed", "position"):
         at = [stop for stop, c in got["changes"] if c["output"] == output]
         assert len(at) == 1 and 10250 <= at[0] <= 10750, (output, at)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1200)  # CPU-bound, as above
+@pytest.mark.parametrize("kind", ["mass", "viscous"])
+def test_a_real_change_under_aprbs_is_reported_once(kind: str) -> None:
+    """APRBS windows differ from each other in amplitude distribution (level holds of
+    10-100 samples over a 20 s sequence), yet mass +30 % or viscous friction x2 from sample
+    14100 (the first window holding new data ends at 14250) is reported by each output by
+    14750, and only once in the 20 s after, while the detector relearns the new regime."""
+    plant = load_plant("drive")
+    after = (replace(plant, mass_kg=1.3 * plant.mass_kg) if kind == "mass"
+             else replace(plant, viscous_n_per_mps=2.0 * plant.viscous_n_per_mps))
+    got = _track(plant, "aprbs", 34.2, switch={14100: after})
+    assert got["errors"] == []
+    for output in ("speed", "position"):
+        at = [stop for stop, c in got["changes"] if c["output"] == output]
+        assert len(at) == 1 and 14250 <= at[0] <= 14750, (output, at)
 
 
 def test_position_in_difference_form_stays_bounded_where_its_level_does_not() -> None:

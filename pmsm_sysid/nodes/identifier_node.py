@@ -71,7 +71,7 @@ DEFAULTS: dict[str, Any] = {
     "speed.form": "level",
     "position.ny": 10, "position.nu": 10, "position.degree": 1, "position.delay": 1,
     "position.terms": 15, "position.form": "difference", "min_r2": 0.9, "change.s_confirm": 7.0,
-    "change.baseline": 24, "change.warmup": 8, "change.min_r2": 0.99,
+    "change.baseline": 48, "change.warmup": 8, "change.min_r2": 0.99,
     "publish_period_s": 0.05, "stale_after_s": 1.0,
     "speed_source": "auto", "inputs_report_s": 3.0, "fit_worker": "process",
 }

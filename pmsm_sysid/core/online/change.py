@@ -13,10 +13,13 @@ Decision: a change is reported at window j when the combined score S = sqrt(sum 
 the window's features (each z clipped to [0, ``z_cap``]: errors count only when they grow)
 is >= ``s_confirm`` at both j and j-1: a persistent shift, seen by several features at once
 or strongly by one. A single window never decides (every feature has heavy tails: one odd
-fit). With six features S is about 2.4 on a stationary plant. After a change the
+fit). With six features S is about 2.4 on a stationary plant (median; about 1.5 under
+APRBS, whose harmonic content is not observed). After a change the
 baselines are cleared; the next ``holdoff`` windows are ignored (they still hold data from
 before the change: window/hop - 1 of them) and the following ``warmup`` windows relearn
-the baselines (no decision meanwhile), so the new regime becomes the reference. A value that
+the baselines (no decision meanwhile), so the new regime becomes the reference; until a
+baseline is full again its scale is at least the one from before the change (a few windows
+show only part of the excitation's window-to-window spread). A value that
 is not finite counts as "no observation" for two-sided features; for one-sided (error-like)
 ones, e.g. a diverged free run, it adds ``z_cap`` to S.
 
@@ -28,6 +31,12 @@ consecutive windows and no change was reported; the largest single-feature z was
 gain of one odd fit among 156), hence no one-window rule. Cogging (plants/cogging.yaml)
 switched on was reported 2-3 windows after the first window holding cogging data, 0.5 kg of
 payload 2 windows after. ``test/test_change.py`` repeats shorter versions of both.
+
+The baseline holds 48 windows (24 s at hop 250): with window/hop = 4 overlapping windows
+per independent stretch of data, 24 windows gave the MAD only about six independent values,
+and it came out small often enough to raise false alarms (APRBS, level holds over a 20 s
+sequence: its windows differ from each other, and 48 windows span the whole sequence).
+``bench/change_false_alarms.py`` counts false alarms over an hour per excitation.
 """
 
 from __future__ import annotations
@@ -60,7 +69,7 @@ class FeatureSpec:
 class ChangeConfig:
     """Detector settings; defaults are the calibrated ones."""
 
-    baseline: int = 24
+    baseline: int = 48
     warmup: int = 8
     s_confirm: float = 7.0
     z_cap: float = 20.0
@@ -104,6 +113,7 @@ class RobustBaseline:
     def __init__(self, size: int, floor: float = 0.0, rel_floor: float = 0.0) -> None:
         self._values: deque[float] = deque(maxlen=size)
         self._floor, self._rel = floor, rel_floor
+        self._carried = 0.0  # scale kept from before a change, a floor until full again
 
     def __len__(self) -> int:
         return len(self._values)
@@ -112,14 +122,19 @@ class RobustBaseline:
         if math.isfinite(value):
             self._values.append(value)
 
-    def clear(self) -> None:
+    def clear(self, keep_spread: bool = False) -> None:
+        """Forget the values; with ``keep_spread`` their scale stays a floor of the scale until
+        the baseline is full again (see :meth:`ChangeDetector.update`)."""
+        held = len(self._values) >= MIN_REFERENCE
+        self._carried = self.centre_scale()[1] if keep_spread and held else 0.0
         self._values.clear()
 
     def centre_scale(self) -> tuple[float, float]:
         arr = np.fromiter(self._values, dtype=np.float64)
         med = float(np.median(arr))
         mad = float(np.median(np.abs(arr - med)))
-        return med, max(MAD_TO_SIGMA * mad, self._floor, self._rel * abs(med), 1e-300)
+        carried = self._carried if len(arr) < (self._values.maxlen or 0) else 0.0
+        return med, max(MAD_TO_SIGMA * mad, self._floor, self._rel * abs(med), carried, 1e-300)
 
     def z(self, value: float, one_sided: bool) -> float:
         """Robust z-score of ``value`` (signed excess for one-sided features, else |z|);
@@ -170,7 +185,7 @@ class ChangeDetector:
         self._prev_score = score
         if persistent:
             reasons = _leading(z)
-            self.reset()
+            self.reset(keep_spread=True)
             self._settle = cfg.holdoff
             decision = ChangeDecision(seq, "change", z, vals, reasons, score)
             self.events.append(decision)
@@ -178,10 +193,14 @@ class ChangeDetector:
         self._learn(vals)
         return ChangeDecision(seq, "steady", z, vals, score=score)
 
-    def reset(self) -> None:
-        """Forget the baselines (after a change, or when the caller restarts the stream)."""
+    def reset(self, keep_spread: bool = False) -> None:
+        """Forget the baselines (after a change, or when the caller restarts the stream).
+        After a change (``keep_spread``) the old spreads stay floors of the new scales until
+        the baselines are full again: a plant change moves the features' centres, while their
+        window-to-window spread is set by the excitation and the noise, and a few windows of
+        warm-up show only part of it (under APRBS 8 windows are 4 s of a 20 s sequence)."""
         for b in self._base.values():
-            b.clear()
+            b.clear(keep_spread)
         self._prev_score = 0.0
         self._since_reset = 0
 
