@@ -226,6 +226,27 @@ def test_the_fit_error_has_one_scale_for_the_run() -> None:
     assert fit(track, narrow, {"free_run_diverged": True, "nrmse": 0.02}) == math.inf
 
 
+def test_the_out_of_sample_error_is_the_best_of_the_last_two_models() -> None:
+    """One odd fit (a spurious cross term) scores in its own window, not again in the next
+    one's out-of-sample error; a model of another plant fails either way."""
+    from narx_systems import LINEAR, simulate, white_input
+
+    from pmsm_sysid.core.online.tracker import best_newest_error, newest_error
+    from pmsm_sysid.core.terms.model import NarxModel, Term
+
+    def model(coeffs: dict[str, float]) -> NarxModel:
+        return NarxModel(terms=tuple(Term.parse(n) for n in coeffs),
+                         estimates=np.array(list(coeffs.values())))
+
+    u = white_input(1200)
+    y = simulate(LINEAR, u, noise_std=0.01)
+    good, odd = model(LINEAR), model({**LINEAR, "y(k-1)u(k-2)": 0.3})
+    other = model({**LINEAR, "u(k-1)": 1.5})  # the plant's gain changed
+    assert newest_error(odd, y, u, 250) > 10 * newest_error(good, y, u, 250)
+    assert best_newest_error([odd, good], y, u, 250) == newest_error(good, y, u, 250)
+    assert best_newest_error([other, other], y, u, 250) > 10 * newest_error(good, y, u, 250)
+
+
 def test_jaccard_closed_forms() -> None:
     assert jaccard_distance(["a", "b", "c"], ["b", "c", "d"]) == pytest.approx(0.5)
     assert jaccard_distance([], []) == 0.0 and jaccard_distance(["a"], ["b"]) == 1.0

@@ -32,8 +32,11 @@ samples before a feeding the lags, exactly as ``identify --estimate a:b`` does):
    free-run RMS error on its own window, over the output's std in the first window fitted
    (one scale: the output's own spread follows the window's input; a window spanning a
    change fits worse); the
-   out-of-sample error of the previous window's model on the ``hop`` newest samples (free
-   run over the window, NRMSE of the new samples);
+   out-of-sample error of the previous windows' models on the ``hop`` newest samples (free
+   run over the window, NRMSE of the new samples; the smaller of the last two models': one
+   odd fit, e.g. spurious cross terms y(k-i)u(k-j) that cancel on its own window and not on
+   new amplitudes, would otherwise score in the next window too, and one odd fit must not
+   make two windows in a row; a plant change defeats both models);
    the gain and phase of the new model's H1 (Eq. 7 of Liu et al. 2005) at the reference excitation
    frequency f0 (the strongest input line of the first window after a (re)start; the phase
    relative to its value there, wrapped to (-pi, pi]); the Jaccard distance between
@@ -210,6 +213,7 @@ class _OutputTrack:
         self.detector = ChangeDetector(CHANGE_FEATURES, tc.change)
         self.previous: NarxModel | None = None
         self.previous_stop: int | None = None
+        self.before_previous: NarxModel | None = None  # the model of the window before that
         self.ref_freq: float | None = None
         self.ref_phase: float | None = None
         self.ref_spectrum: FloatArray | None = None
@@ -294,6 +298,7 @@ class WindowTracker:
         val = model_json["validation"]
         track.held.append(_Held(model, model_json["model_id"], w.stop_index, info,
                                 val["correlation_tests"], bool(val["correlation_all_pass"])))
+        track.before_previous = track.previous if follows else None
         track.previous, track.previous_stop = model, w.stop_index
 
     # -- pieces -----------------------------------------------------------------------
@@ -378,7 +383,8 @@ class WindowTracker:
         feats["harmonics_db"] = plant_harmonics_db(y_win, u_win)
         feats["fit_nrmse"] = self._fit_error(track, y[model.max_lag:], est)
         if track.previous is not None and track.previous_stop == w.stop_index - self.config.hop:
-            feats["xval_nrmse"] = newest_error(track.previous, y, u, self.config.hop)
+            recent = [m for m in (track.previous, track.before_previous) if m is not None]
+            feats["xval_nrmse"] = best_newest_error(recent, y, u, self.config.hop)
             feats["term_jaccard"] = jaccard_distance(model.term_names, track.previous.term_names)
         return feats
 
@@ -464,6 +470,15 @@ def plant_harmonics_db(y: FloatArray, u: FloatArray) -> float:
     if not own <= INPUT_HARMONICS_MAX_DB:  # also NaN: no line, or harmonics above Nyquist
         return math.nan
     return harmonics_db(y, f0)
+
+
+def best_newest_error(models: list[NarxModel], y: FloatArray, u: FloatArray,
+                      hop: int) -> float:
+    """The smallest :func:`newest_error` of ``models`` (the last models of the stream): one
+    odd fit among them does not score, a plant change in the newest samples defeats all."""
+    errors = [newest_error(m, y, u, hop) for m in models]
+    finite = [e for e in errors if not math.isnan(e)]
+    return min(finite) if finite else math.nan
 
 
 def newest_error(model: NarxModel, y: FloatArray, u: FloatArray, hop: int) -> float:
