@@ -151,7 +151,7 @@ def test_a_baseline_scores_nothing_before_it_holds_three_values() -> None:
 def test_harmonic_content_is_observed_only_when_the_input_has_none_there() -> None:
     """Under a tone the output's harmonics are the plant's; under APRBS or PRBS they are the
     input's own (each window's differ), so the feature is left out."""
-    from pmsm_sysid.core.online.tracker import (
+    from pmsm_sysid.core.online.features import (
         INPUT_HARMONICS_MAX_DB,
         harmonics_db,
         plant_harmonics_db,
@@ -231,7 +231,7 @@ def test_the_out_of_sample_error_is_the_best_of_the_last_two_models() -> None:
     one's out-of-sample error; a model of another plant fails either way."""
     from narx_systems import LINEAR, simulate, white_input
 
-    from pmsm_sysid.core.online.tracker import best_newest_error, newest_error
+    from pmsm_sysid.core.online.features import best_newest_error, newest_error
     from pmsm_sysid.core.terms.model import NarxModel, Term
 
     def model(coeffs: dict[str, float]) -> NarxModel:
