@@ -161,12 +161,17 @@ def test_hard_kill_loses_at_most_one_flush_interval(tmp_path: Path, sig: int) ->
                                                    (signal.SIGTERM, True, "mcap")])
 def test_interrupt_finalises_everything(tmp_path: Path, sig: int, graceful: bool,
                                         storage: str) -> None:
-    """SIGINT, or SIGTERM under sigterm_as_exit(): every message written is in the bag."""
+    """SIGINT, or SIGTERM under sigterm_as_exit(): every message written is in the bag.
+
+    The child counts a message once ``write`` has returned; a signal that lands between the
+    return and the count leaves that one message in the bag but not in the count, so the bag
+    holds the counted messages and at most the one in flight, in order, nothing invented."""
     bag = tmp_path / "stopped"
     _, written = _record_then_signal(bag, storage, sig, graceful)
     assert written is not None
     got = _bag_messages(bag)
-    assert got == [(k, float(k)) for k in range(written)]
+    assert got == [(k, float(k)) for k in range(len(got))]
+    assert written <= len(got) <= written + 1, (written, len(got))
     ext = "db3" if storage == "sqlite3" else "mcap"
     assert sorted(p.name for p in bag.iterdir()) == sorted(["metadata.yaml", f"stopped.{ext}"])
 
