@@ -14,16 +14,16 @@ import pytest
 
 from pmsm_sysid.bagio import read_recording
 from pmsm_sysid.core.discrepancy import DiagnoseOptions, DiagnoseResult, FoundEffect, diagnose
-from pmsm_sysid.core.discrepancy.closed_loop import (
-    PositionLoop,
-    reference_trajectory,
-    run_closed_loop,
-)
 from pmsm_sysid.core.discrepancy.scenarios import (
     FS,
     SCENARIOS,
     TRUTH_TOLERANCE,
     make_recording,
+)
+from pmsm_sysid.core.physics.closed_loop import (
+    PositionLoop,
+    reference_trajectory,
+    run_closed_loop,
 )
 from pmsm_sysid.core.physics.plant import load_plant, nominal_plant
 

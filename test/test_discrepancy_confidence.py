@@ -18,10 +18,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from battery_plant import Case, Truth, record
 
 from pmsm_sysid.core.discrepancy import DiagnoseOptions, diagnose
-from pmsm_sysid.core.discrepancy.diagnose import _confidence, cap_on_replay
-from pmsm_sysid.core.discrepancy.result import FoundEffect
-from pmsm_sysid.core.discrepancy.stats import HeldOutTest
+from pmsm_sysid.core.discrepancy.diagnose import cap_on_replay
 from pmsm_sysid.core.physics.plant import nominal_plant
+from pmsm_sysid.core.plantfit.fit import confidence as _confidence
+from pmsm_sysid.core.plantfit.found import FoundEffect
+from pmsm_sysid.core.plantfit.stats import HeldOutTest
 
 FAST = DiagnoseOptions(replay=False, gfrf=False)
 

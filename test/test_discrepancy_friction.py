@@ -20,8 +20,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from battery_plant import Case, Truth, record
 
 from pmsm_sysid.core.discrepancy import DiagnoseOptions, diagnose
-from pmsm_sysid.core.discrepancy.calibration import SpeedPrior, friction_values
 from pmsm_sysid.core.physics.plant import nominal_plant
+from pmsm_sysid.core.plantfit.calibration import SpeedPrior, friction_values
 
 FAST = DiagnoseOptions(replay=False, gfrf=False)
 BASE = 1e-3

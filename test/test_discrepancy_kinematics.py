@@ -8,19 +8,11 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from pmsm_sysid.core.discrepancy.averaging import interval_force, interval_friction
-from pmsm_sysid.core.discrepancy.closed_loop import (
+from pmsm_sysid.core.physics.closed_loop import (
     PositionLoop,
     reference_trajectory,
     run_closed_loop,
 )
-from pmsm_sysid.core.discrepancy.kinematics import (
-    choose_filter,
-    equation_data,
-    feedback_z,
-    smoothed_speed_noise,
-)
-from pmsm_sysid.core.discrepancy.library import Effect, columns
 from pmsm_sysid.core.physics.excitation import make_excitation
 from pmsm_sysid.core.physics.motor import effects_force, simulate
 from pmsm_sysid.core.physics.plant import (
@@ -32,6 +24,14 @@ from pmsm_sysid.core.physics.plant import (
     TransportDelay,
     nominal_plant,
 )
+from pmsm_sysid.core.plantfit.averaging import interval_force, interval_friction
+from pmsm_sysid.core.plantfit.kinematics import (
+    choose_filter,
+    equation_data,
+    feedback_z,
+    smoothed_speed_noise,
+)
+from pmsm_sysid.core.plantfit.library import Effect, columns
 from pmsm_sysid.core.recording.signals import Recording
 
 FS = 500.0

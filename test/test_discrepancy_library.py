@@ -8,9 +8,6 @@ import numpy as np
 import pytest
 
 from pmsm_sysid.core.discrepancy import diagnose
-from pmsm_sysid.core.discrepancy.kinematics import equation_data
-from pmsm_sysid.core.discrepancy.library import Effect, columns
-from pmsm_sysid.core.discrepancy.select import Candidates, _family_err
 from pmsm_sysid.core.physics.excitation import make_excitation
 from pmsm_sysid.core.physics.motor import simulate
 from pmsm_sysid.core.physics.plant import (
@@ -26,6 +23,9 @@ from pmsm_sysid.core.physics.plant import (
     nominal_plant,
     plant_from_dict,
 )
+from pmsm_sysid.core.plantfit.kinematics import equation_data
+from pmsm_sysid.core.plantfit.library import Effect, columns
+from pmsm_sysid.core.plantfit.select import Candidates, _family_err
 
 NOISE = Noise(speed_std=0.002, position_std=5e-6, force_std=0.5)
 THRUST = make_excitation("paper-position", 2500, 500.0, seed=1)

@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 from scipy.signal import lfilter
 
-from pmsm_sysid.core.discrepancy.stats import (
+from pmsm_sysid.core.plantfit.stats import (
     ar_whitener,
     held_out_test,
     nested_f_test,

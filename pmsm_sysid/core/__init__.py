@@ -9,10 +9,14 @@ Grouped by stage, in the order the data flows (a stage imports only stages befor
 - :mod:`~pmsm_sysid.core.validation`: one-step-ahead and model predicted output, fit
   metrics, the five correlation tests;
 - :mod:`~pmsm_sysid.core.frequency`: GFRFs H1-H3, ridges and poles;
-- :mod:`~pmsm_sysid.core.physics`: plant files, excitation signals, the motor simulator;
+- :mod:`~pmsm_sysid.core.physics`: plant files, excitation signals, the motor simulator
+  (open loop or under a position loop);
+- :mod:`~pmsm_sysid.core.plantfit`: a physical plant from a recording -- equation-error data,
+  the library of named effects, their selection, estimation and held-out confirmation;
 - :mod:`~pmsm_sysid.core.online`: windows, fit worker processes, the per-window tracker and
   change detection (what ``run`` does, without ROS);
-- :mod:`~pmsm_sysid.core.discrepancy`: ``diagnose``, sim-to-real.
+- :mod:`~pmsm_sysid.core.discrepancy`: a recording against a plant -- ``diagnose``,
+  sim-to-real: where the mismatch lives, what is left unexplained, the fit before/after.
 
 Errors of every stage are the types in :mod:`~pmsm_sysid.core.errors`.
 """

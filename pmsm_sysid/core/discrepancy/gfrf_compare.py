@@ -46,13 +46,13 @@ from ..errors import PmsmSysidError
 from ..frequency.analysis import GfrfAnalysis, analyse, nonlinear_err
 from ..physics.motor import simulate
 from ..physics.plant import Plant
+from ..plantfit.stats import nested_f_test
 from ..recording.signals import Recording
 from ..selection.identifiability import ExcitationSummary, excitation_summary
 from ..selection.identify import FitConfig, NarxFit, fit_narx
 from ..terms.candidates import candidate_set
 from ..terms.model import NarxModel, Structure
 from ..terms.regressors import lag_base, target, term_matrix
-from .stats import nested_f_test
 
 FloatArray = NDArray[np.float64]
 

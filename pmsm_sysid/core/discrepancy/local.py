@@ -15,15 +15,27 @@ acts: the share of the mismatch it explains over the samples within its half-max
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
-from .kinematics import EquationData, thinned
-from .nonparam import FWHM, N_INTERVALS, bump_column
+from ..plantfit.kinematics import EquationData, thinned
 
 FloatArray = NDArray[np.float64]
 
+#: Knot intervals of the curves over an axis (:mod:`.nonparam`); the bump's widths follow them.
+N_INTERVALS = 14
+#: Full width at half maximum of a Gaussian over its σ.
+FWHM = 2.0 * math.sqrt(2.0 * math.log(2.0))
+
 WIDTHS = tuple(f / N_INTERVALS for f in (0.25, 0.5, 1.0))  # σ as a fraction of the range
+
+
+def bump_column(x: FloatArray, centre: float, sigma: float) -> FloatArray:
+    """exp(-(x - centre)² / 2σ²): a force at one place of the stroke."""
+    out: FloatArray = np.exp(-0.5 * ((np.asarray(x) - centre) / sigma) ** 2)
+    return out
 
 
 def local_grid(data: EquationData) -> tuple[list[tuple[float, float]], float]:

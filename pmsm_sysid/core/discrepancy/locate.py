@@ -18,8 +18,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from .kinematics import EquationData, thinned, thinned_times
-from .stats import lstsq, nested_f_test
+from ..plantfit.kinematics import EquationData, thinned, thinned_times
+from ..plantfit.stats import lstsq, nested_f_test
 
 FloatArray = NDArray[np.float64]
 

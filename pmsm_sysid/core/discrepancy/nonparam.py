@@ -31,16 +31,15 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import BSpline
 
-from .kinematics import EquationData, thinned, thinned_times
-from .stats import ar_whitener, lstsq, whiten
+from ..plantfit.kinematics import EquationData, thinned, thinned_times
+from ..plantfit.stats import ar_whitener, lstsq, whiten
+from .local import FWHM, N_INTERVALS, best_bump, bump_column
 
 FloatArray = NDArray[np.float64]
 
-N_INTERVALS = 14
 DEGREE = 3
 UNITS = {"position": "m", "velocity": "m/s", "thrust": "N", "time": "s",
          "position_friction": "m", "position_local": "m"}
-FWHM = 2.0 * math.sqrt(2.0 * math.log(2.0))  # full width at half maximum of a Gaussian / σ
 
 
 @dataclass(frozen=True)
@@ -128,12 +127,6 @@ class AxisModel:
                 "curve": {"at": grid[pick].tolist(), "force_n": g[pick].tolist()}}
 
 
-def bump_column(x: FloatArray, centre: float, sigma: float) -> FloatArray:
-    """exp(-(x - centre)² / 2σ²): a force at one place of the stroke."""
-    out: FloatArray = np.exp(-0.5 * ((np.asarray(x) - centre) / sigma) ** 2)
-    return out
-
-
 def _rise(grid: FloatArray, g: FloatArray, inner: tuple[float, float]) -> FloatArray:
     """How much steeper than its typical slope the curve rises (a dead zone's turn), over
     the knot spacing (the spline's own resolution) and among the values often met."""
@@ -204,8 +197,6 @@ def fit_axis_with(data: EquationData, y: FloatArray, base: FloatArray, axis: str
         freq = freq_hz if freq_hz > 0 else _slow_line(r, thinned_times(data))
         model = AxisModel(axis, 0.0, 0.0, np.zeros(2), np.eye(2), freq)
     elif axis == "position_local":
-        from .local import best_bump  # the scan builds on this module's columns
-
         c, sig = best_bump(data, y, base) or (0.0, 1.0)
         model = AxisModel(axis, c - 3 * sig, c + 3 * sig, np.zeros(1), np.eye(1),
                           bump=(c, sig))

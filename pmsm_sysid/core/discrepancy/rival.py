@@ -21,13 +21,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .estimate import Fit, contributions, design
-from .kinematics import EquationData
-from .library import MIN_PERIODS, periods_seen
+from ..plantfit.estimate import Fit, contributions, design
+from ..plantfit.found import FoundEffect
+from ..plantfit.kinematics import EquationData
+from ..plantfit.library import MIN_PERIODS, periods_seen
+from ..plantfit.select import share_of
+from ..plantfit.stats import HeldOutTest, held_out_test, nested_f_test
 from .nonparam import AxisModel, fit_axis_with
-from .result import FoundEffect
-from .select import share_of
-from .stats import HeldOutTest, held_out_test, nested_f_test
 
 FloatArray = NDArray[np.float64]
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import DiagnoseError
+from ..physics.closed_loop import PositionLoop, reference_trajectory, run_closed_loop
 from ..physics.excitation import make_excitation
 from ..physics.motor import simulate
 from ..physics.plant import (
@@ -28,7 +29,6 @@ from ..physics.plant import (
     nominal_plant,
 )
 from ..recording.signals import Recording
-from .closed_loop import PositionLoop, reference_trajectory, run_closed_loop
 
 NOISE = Noise(speed_std=0.002, position_std=5e-6, force_std=1.0)
 QUANT = Quantisation(position_m=1e-6)

@@ -22,16 +22,24 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..physics.plant import Plant
+from ..plantfit.estimate import Fit, contributions, design
+from ..plantfit.found import FoundEffect
+from ..plantfit.kinematics import EquationData
+from ..plantfit.select import Step
+from ..plantfit.stats import (
+    HeldOutTest,
+    ar_whitener,
+    held_out_test,
+    lstsq,
+    nested_f_test,
+    nrmse,
+    whiten,
+)
 from ..validation.correlation import correlation_tests
-from .estimate import Fit, contributions, design
-from .kinematics import EquationData
 from .local import local_grid, local_share
 from .locate import AxisFinding, scan_axes
 from .nonparam import AxisModel, fit_axis, fit_axis_with
 from .resim import Z_VERDICT, choose_horizon, compare
-from .result import FoundEffect
-from .select import Step
-from .stats import HeldOutTest, ar_whitener, held_out_test, lstsq, nested_f_test, nrmse, whiten
 
 FloatArray = NDArray[np.float64]
 

@@ -22,6 +22,8 @@ from .plant_schema import (
     MAX_FILE_BYTES,
     _unknown,
     check_value,
+    plant_schema,
+    plant_validator,
     validate_plant_mapping,
     yaml_loader,
 )
@@ -313,9 +315,20 @@ def _block_from(name: str, value: Any, context: Mapping[str, Any]) -> Any:
     return _build(EFFECT_BLOCKS[name], value, f"{name}.", context)
 
 
+_VALIDATOR: Any = None
+
+
+def _validator() -> Any:
+    """The plant file's schema validator, built on first use (jsonschema loads lazily)."""
+    global _VALIDATOR
+    if _VALIDATOR is None:
+        _VALIDATOR = plant_validator(plant_schema(Plant, EFFECT_BLOCKS, Harmonic))
+    return _VALIDATOR
+
+
 def plant_from_dict(d: Mapping[str, Any]) -> Plant:
     """Build and validate a :class:`Plant` from a plant-file mapping (missing keys = nominal)."""
-    validate_plant_mapping(d)  # the schema: every key, type and bound, before anything else
+    validate_plant_mapping(d, _validator())  # every key, type and bound, before anything else
     nominal = Plant()
     context = {"ls_h": d.get("ls_h", nominal.ls_h), "rs_ohm": d.get("rs_ohm", nominal.rs_ohm)}
     for key in ("ls_h", "rs_ohm"):

@@ -107,14 +107,12 @@ def _number(name: str) -> dict[str, Any]:
     return out
 
 
-def _object(cls: type, *, block: bool) -> dict[str, Any]:
+def _object(cls: type, *, block: bool, harmonic: type | None = None) -> dict[str, Any]:
     props: dict[str, Any] = {}
     for f in fields(cls):
-        if f.name == "harmonics":
-            from .plant import Harmonic
-
+        if f.name == "harmonics" and harmonic is not None:
             props[f.name] = {"type": "array", "maxItems": MAX_HARMONICS,
-                             "items": _object(Harmonic, block=False)}
+                             "items": _object(harmonic, block=False)}
         elif f.name == "tau_s":
             props[f.name] = {"anyOf": [_number(f.name), {"const": "electrical"}]}
         else:
@@ -127,13 +125,14 @@ def _object(cls: type, *, block: bool) -> dict[str, Any]:
             "required": required}
 
 
-def plant_schema() -> dict[str, Any]:
-    """The JSON Schema (draft 2020-12) of a plant file, plus the keyword ``finite``."""
-    from .plant import EFFECT_BLOCKS, Plant
-
-    schema = _object(Plant, block=False)
-    for name, cls in EFFECT_BLOCKS.items():
-        schema["properties"][name] = {"anyOf": [{"type": "null"}, _object(cls, block=True)]}
+def plant_schema(plant: type, blocks: Mapping[str, type], harmonic: type) -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of a plant file, plus the keyword ``finite``: the
+    fields of the ``plant`` dataclass, each effect block of ``blocks`` (or null), cogging
+    harmonics as ``harmonic`` entries."""
+    schema = _object(plant, block=False)
+    for name, cls in blocks.items():
+        schema["properties"][name] = {"anyOf": [{"type": "null"},
+                                                _object(cls, block=True, harmonic=harmonic)]}
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     return schema
 
@@ -145,17 +144,11 @@ def _finite(validator: Any, wanted: Any, instance: Any, schema: Any) -> Any:
         yield ValidationError(f"{instance} is not finite")
 
 
-_VALIDATOR: Any = None
+def plant_validator(schema: dict[str, Any]) -> Any:
+    """A jsonschema validator of ``schema`` that knows the keyword ``finite``."""
+    from jsonschema import Draft202012Validator, validators
 
-
-def _validator() -> Any:
-    global _VALIDATOR
-    if _VALIDATOR is None:
-        from jsonschema import Draft202012Validator, validators
-
-        cls = validators.extend(Draft202012Validator, {"finite": _finite})
-        _VALIDATOR = cls(plant_schema())
-    return _VALIDATOR
+    return validators.extend(Draft202012Validator, {"finite": _finite})(schema)
 
 
 def _where(path: Any) -> str:
@@ -214,13 +207,14 @@ def _message(error: Any) -> PlantError:
     return PlantError(f"{key}: {e.message:.120}")  # pragma: no cover - every keyword above
 
 
-def validate_plant_mapping(d: Any) -> None:
-    """Refuse a plant mapping that breaks the schema, naming the first offending key."""
+def validate_plant_mapping(d: Any, validator: Any) -> None:
+    """Refuse a plant mapping that breaks the schema of ``validator``
+    (:func:`plant_validator`), naming the first offending key."""
     if not isinstance(d, Mapping):
         raise PlantError(f"a plant must be a mapping of keys, got {type(d).__name__}")
     from jsonschema.exceptions import best_match
 
-    error = best_match(_validator().iter_errors(d),
+    error = best_match(validator.iter_errors(d),
                        key=lambda e: (-len(e.absolute_path), e.validator != "anyOf"))
     if error is not None:
         raise _message(error)

@@ -18,9 +18,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import DataError
-from ..physics.motor import MotorSimulator
-from ..physics.plant import Plant, dump_plant
 from ..recording.signals import Recording
+from .motor import MotorSimulator
+from .plant import Plant, dump_plant
 
 FloatArray = NDArray[np.float64]
 

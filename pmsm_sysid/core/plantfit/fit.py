@@ -1,0 +1,254 @@
+"""The effects a recording shows beyond a reference plant: select, confirm, re-estimate, name.
+
+The recording is split into estimation and held-out data (or paired with a held-out
+recording) and each part becomes equation-error data against the reference plant
+(:mod:`.kinematics`). Then:
+
+1. **Name** -- forward regression over the library (:mod:`.select`): ERR ranking (Eq. 4 of
+   Liu et al. 2005), prewhitened F-tests with a Bonferroni correction for every candidate
+   and pitch searched, and a floor on the share of the mismatch explained.
+2. **Model** -- nonlinear refinement, look-alike disambiguation and held-out confirmation
+   (:mod:`.modelling`).
+3. **Re-estimate** -- without a held-out recording, the confirmed effects are re-estimated
+   on the whole recording and a backward pass drops what is no longer significant.
+4. **Report** -- each effect's parameters with standard errors (:mod:`.translate`), its
+   significance given all the others, its share of the mismatch, its held-out test and a
+   confidence (:class:`.found.FoundEffect`).
+
+``diagnose`` runs this against the user's plant and goes on to locate what is left;
+fitting a plant from a recording runs it with the mass and viscous terms searched too.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from ..errors import DiagnoseError, PlantError
+from ..physics.plant import Plant
+from ..recording.signals import Recording, check_finite
+from .estimate import Fit, design, refine
+from .found import FoundEffect, capped
+from .kinematics import (
+    FEEDBACK_Z,
+    EquationData,
+    FilterSpec,
+    choose_filter,
+    equation_data,
+    feedback_z,
+    kinematic_mode,
+)
+from .library import MIN_PERIODS, Effect, periods_seen
+from .modelling import Alternative, Model, confirmed_model
+from .select import ALPHA, MAX_EFFECTS, MIN_SHARE, Candidates, Step, forward_select, score_step
+from .stats import HeldOutTest, ar_whitener, lstsq, whiten
+from .translate import corrected_plant, effect_params
+
+#: Share of a single recording used for estimation; the rest is held out.
+SPLIT = 0.7
+#: Which look-alike comparison (:func:`.modelling.build_model`) an effect's name belongs to.
+LOOKALIKE = {"thrust_lag": "thrust_lag", "transport_delay": "thrust_lag",
+             "stribeck_friction": "stribeck_friction", "coulomb_friction": "stribeck_friction"}
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Thresholds of the selection (defaults are the documented ones)."""
+
+    alpha: float = ALPHA
+    min_share: float = MIN_SHARE
+    split: float = SPLIT
+    max_effects: int = MAX_EFFECTS
+
+
+@dataclass(frozen=True)
+class Segments:
+    """Equation data of the estimation, held-out and (if split) whole recording."""
+
+    est: EquationData
+    val: EquationData
+    full: EquationData | None
+    recs: dict[str, Recording]
+    feedback: float = 0.0
+
+    @property
+    def closed_loop(self) -> bool:
+        """The thrust answers the sensor noise (see :func:`.kinematics.feedback_z`)."""
+        return self.feedback > FEEDBACK_Z
+
+
+def _filter_for(spec: FilterSpec, fs: float) -> FilterSpec:
+    """The same cut-off at another sample rate (decimation and edge recomputed)."""
+    return replace(spec, decimation=max(1, int(fs / (2.5 * spec.cutoff_hz))),
+                   edge=int(np.ceil(3.0 * fs / spec.cutoff_hz)))
+
+
+def segments(plant: Plant, real: Recording, validate: Recording | None,
+             split: float = SPLIT) -> Segments:
+    """Split (or pair) the recordings and build their equation-error data."""
+    for rec in (real, validate):
+        if rec is not None:
+            check_finite(rec)
+    if validate is None:
+        cut = int(split * len(real))
+        if cut < 10 or len(real) - cut < 10:
+            raise DiagnoseError(f"{len(real)} samples cannot be split for held-out data")
+        recs = {"estimation": real.window(0, cut), "validation": real.window(cut, len(real))}
+    else:
+        recs = {"estimation": real, "validation": validate}
+    spec = choose_filter(recs["estimation"].speed, recs["estimation"].sample_rate_hz)
+    vspec = spec if recs["validation"].sample_rate_hz == recs["estimation"].sample_rate_hz \
+        else _filter_for(spec, recs["validation"].sample_rate_hz)
+    fb = feedback_z(recs["estimation"])
+    closed = fb > FEEDBACK_Z
+    mode = kinematic_mode(recs["estimation"], spec, closed)
+    est = equation_data(plant, recs["estimation"], spec, mode, closed)
+    val = equation_data(plant, recs["validation"], vspec, mode, closed)
+    full = equation_data(plant, real, spec, mode, closed) if validate is None else None
+    return Segments(est, val, full, recs, fb)
+
+
+@dataclass(frozen=True)
+class EffectsFit:
+    """What :func:`fit_effects` found: the confirmed model, its final estimate, the effects."""
+
+    segs: Segments
+    model: Model
+    """Refined and confirmed on the estimation data (held-out numbers stay honest)."""
+    final: Fit
+    """The same effects re-estimated on :attr:`data` and pruned."""
+    data: EquationData
+    """The whole recording when it was split, else the estimation recording."""
+    found: tuple[FoundEffect, ...]
+    dropped: tuple[Effect, ...]
+    """Significant on the estimation data but not confirmed on held-out data."""
+    ranking: tuple[Step, ...]
+    """The library's candidates ranked by ERR on the reference plant's residual."""
+    n_tests: float
+
+
+def fit_effects(plant: Plant, segs: Segments, opts: FitOptions | None = None) -> EffectsFit:
+    """Select, confirm, re-estimate and name the effects of ``segs`` beyond ``plant``."""
+    opts = opts or FitOptions()
+    cands = Candidates.build(segs.est, exclude=("thrust_lag",) if segs.closed_loop else ())
+    n_tests = sum(f.n_independent for f in cands.families)
+    ranking = score_step(segs.est, cands, [], opts.alpha, opts.min_share)
+    steps, _ = forward_select(segs.est, cands, opts.alpha, opts.min_share, opts.max_effects)
+    model, held, dropped = confirmed_model(tuple(s.effect for s in steps), segs.est,
+                                           segs.val, opts.alpha, opts.min_share)
+    final, fdata = _final(model, segs)
+    final, held = _prune(final, fdata, list(held), n_tests, opts.alpha)
+    found = _named(final, fdata, plant, held, model.alternatives, n_tests, opts.alpha)
+    return EffectsFit(segs, model, final, fdata, tuple(found), tuple(dropped),
+                      tuple(ranking), n_tests)
+
+
+def drop_one(fit: Fit, data: EquationData, n_tests: float) -> list[float]:
+    """Significance (-log10 corrected p) of each effect given all the others."""
+    from scipy import stats
+
+    X, fixed = design(fit.effects, data)
+    poly = ar_whitener(data.y - fixed - X @ fit.beta)
+    _, r1 = lstsq(whiten(poly, X), whiten(poly, data.y - fixed))  # GLS, like the reduced fits
+    sse1 = float(r1 @ r1)
+    dof = max(1, len(r1) - X.shape[1] - len(fit.eta))
+    out = []
+    for k in range(len(fit.effects)):
+        rest = fit.effects[:k] + fit.effects[k + 1:]
+        Xr, fr = design(rest, data)
+        _, r0 = lstsq(whiten(poly, Xr), whiten(poly, data.y - fr))
+        q = max(1, fit.effects[k].width)
+        f = max(0.0, (float(r0 @ r0) - sse1) / q) / (sse1 / dof)
+        out.append(capped(float(stats.f.logsf(f, q, dof)) / np.log(10.0)
+                          + np.log10(max(n_tests, 1.0))))
+    return out
+
+
+def _shares(fit: Fit, data: EquationData) -> list[float]:
+    """Sequential share of the mismatch energy (ERR in the selection order)."""
+    yy = float(data.y @ data.y)
+    prev = yy
+    out = []
+    for k in range(1, len(fit.effects) + 1):
+        X, fixed = design(fit.effects[:k], data)
+        _, r = lstsq(X, data.y - fixed)
+        sse = float(r @ r)
+        out.append(max(0.0, (prev - sse) / yy))
+        prev = sse
+    return out
+
+
+def confidence(sig: float, held: HeldOutTest | None, alt: Alternative | None, alpha: float,
+               identified: bool = True) -> str:
+    """high: overwhelming on both data sets (the held-out recording included), no
+    look-alike tie and a shape the data can tell (a pitch met twice over the travel);
+    moderate: significant and significantly better on held-out data (or tied, or not
+    identified); low: otherwise."""
+    tie = alt is not None and abs(alt.delta_chi2) < 3.84
+    if held is not None and held.p_value < 1e-3 and sig >= 10.0 and not tie and identified:
+        return "high"
+    if sig >= -np.log10(alpha) and (held is None or held.significant):
+        return "moderate"
+    return "low"
+
+
+def _named(fit: Fit, data: EquationData, plant: Plant, held: list[Any],
+           alts: dict[str, Alternative], n_tests: float, alpha: float,
+           ) -> list[FoundEffect]:
+    sigs = drop_one(fit, data, n_tests)
+    shares = _shares(fit, data)
+    out = []
+    for k, e in enumerate(fit.effects):
+        params, std = effect_params(fit, k, plant)
+        alt = alts.get(LOOKALIKE.get(e.name, ""))
+        notes = []
+        alt_d = None
+        if alt is not None and alt.name != e.name:
+            alt_d = alt.to_dict()
+            if abs(alt.delta_chi2) < 3.84:
+                notes.append(f"indistinguishable from {alt.name} in these data "
+                             f"(Δχ² = {alt.delta_chi2:.2f} < 3.84)")
+        periods = periods_seen(e, data)
+        if periods < MIN_PERIODS:
+            notes.append(f"the travel covers {periods:.1f} periods of this pitch: no phase "
+                         "of it is met twice, so a smooth curve over position (a local "
+                         "force) explains it as well -- not identified as periodic")
+        out.append(FoundEffect(e.name, params, std, sigs[k], shares[k], held[k],
+                               confidence(sigs[k], held[k], alt, alpha,
+                                          periods >= MIN_PERIODS), tuple(notes), alt_d))
+    return out
+
+
+def correct(plant: Plant, named: list[tuple[str, dict[str, Any]]]) -> tuple[Plant, list[str]]:
+    """``plant`` with the named effects applied, or ``plant`` and a note if that is invalid."""
+    try:
+        return corrected_plant(plant, [(n, p) for n, p in named if n != "unexplained"])
+    except PlantError as exc:
+        return plant, [f"the corrected plant is not valid ({exc}); the nominal one is kept"]
+
+
+def _final(model: Model, segs: Segments) -> tuple[Fit, EquationData]:
+    """The confirmed model re-estimated on the whole recording when it was split."""
+    if segs.full is None or not model.fit.effects:
+        return model.fit, segs.est
+    X, fixed = design(model.fit.effects, segs.full)
+    _, r = lstsq(X, segs.full.y - fixed)
+    return refine(model.fit.effects, segs.full, ar_whitener(r)), segs.full
+
+
+def _prune(fit: Fit, data: EquationData, held: list[Any], n_tests: float,
+           alpha: float) -> tuple[Fit, list[Any]]:
+    """Backward elimination on the final data: drop effects no longer significant."""
+    while fit.effects:
+        sigs = drop_one(fit, data, n_tests)
+        k = int(np.argmin(sigs))
+        if sigs[k] >= -np.log10(alpha):
+            break
+        rest = fit.effects[:k] + fit.effects[k + 1:]
+        X, fixed = design(rest, data)
+        _, r = lstsq(X, data.y - fixed)
+        fit = refine(rest, data, ar_whitener(r))
+        held = held[:k] + held[k + 1:]
+    return fit, held
