@@ -17,7 +17,8 @@ Example:
 | `simulate`, `Plant` | the motor model offline (`Plant.nominal()`, `Plant.from_yaml`) |
 | `identify` → `Identification` | polynomial NARX by orthogonal forward regression |
 | `gfrf` → `GfrfAnalysis` | generalized frequency response functions, peaks, ridges |
-| `diagnose` → `Diagnosis` | which physics a plant leaves out, and the corrected plant |
+| `fit_plant` → `PlantFit` | the physical plant (mass, viscous, effects) of a recording |
+| `diagnose` → `Diagnosis` | which physics a plant (or a simulator's recording) leaves out |
 | `PmsmSysidError` | base of every error raised on bad input |
 
 Each result's ``to_dict()`` is the JSON the matching ``pmsm-sysid`` verb writes.
@@ -34,8 +35,9 @@ from .core.errors import PmsmSysidError
 __version__ = "0.1.0"
 
 __all__ = [
-    "Diagnosis", "GfrfAnalysis", "Identification", "NarxModel", "Plant", "PmsmSysidError",
-    "Recording", "diagnose", "gfrf", "identify", "read_bag", "simulate", "write_bag",
+    "Diagnosis", "GfrfAnalysis", "Identification", "NarxModel", "Plant", "PlantFit",
+    "PmsmSysidError", "Recording", "diagnose", "fit_plant", "gfrf", "identify", "read_bag",
+    "simulate", "write_bag",
 ]
 
 if TYPE_CHECKING:
@@ -45,8 +47,10 @@ if TYPE_CHECKING:
         Identification,
         NarxModel,
         Plant,
+        PlantFit,
         Recording,
         diagnose,
+        fit_plant,
         gfrf,
         identify,
         read_bag,

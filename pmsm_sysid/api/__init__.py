@@ -1,7 +1,8 @@
 """The public Python API, re-exported at the top level as ``import pmsm_sysid as ps``.
 
 Modules: :mod:`.recordings` (bags), :mod:`.simulation`, :mod:`.identification`,
-:mod:`.frequency` (GFRFs), :mod:`.diagnosis` (sim-to-real). No ROS installation is needed.
+:mod:`.frequency` (GFRFs), :mod:`.plantfit` (a physical plant from a recording),
+:mod:`.diagnosis` (sim-to-real). No ROS installation is needed.
 """
 
 from ..core.errors import PmsmSysidError
@@ -12,10 +13,12 @@ from ..core.terms.model import NarxModel
 from .diagnosis import Diagnosis, diagnose
 from .frequency import gfrf
 from .identification import Identification, identify
+from .plantfit import PlantFit, fit_plant
 from .recordings import read_bag, write_bag
 from .simulation import simulate
 
 __all__ = [
-    "Diagnosis", "GfrfAnalysis", "Identification", "NarxModel", "Plant", "PmsmSysidError",
-    "Recording", "diagnose", "gfrf", "identify", "read_bag", "simulate", "write_bag",
+    "Diagnosis", "GfrfAnalysis", "Identification", "NarxModel", "Plant", "PlantFit",
+    "PmsmSysidError", "Recording", "diagnose", "fit_plant", "gfrf", "identify", "read_bag",
+    "simulate", "write_bag",
 ]
