@@ -3,7 +3,8 @@
 A "simulator" plant that is not the nominal one (3.1 kg, 25 N s/m) recorded at 1 kHz, and
 "real" variants of it at 500 Hz, open loop or under a PID position loop, all with realistic
 noise on every signal: speed 2 mm/s, position 5 µm (1 µm encoder steps), a 1 N process
-force and, where asked, 2 N of noise on the thrust reading itself.
+force and, where asked, 2 N of noise on the thrust reading itself. Under the loop an
+excitation may be injected into the controller's output (closed-loop identification).
 """
 
 from __future__ import annotations
@@ -11,7 +12,6 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
-import numpy as np
 
 from pmsm_sysid.core.physics.closed_loop import (
     PositionLoop,
@@ -42,17 +42,15 @@ def open_loop(p: Plant, excitation: str, seconds: float, seed: int) -> Recording
     return simulate(p, make_excitation(excitation, n, p.sample_rate_hz, seed=seed), seed=seed)
 
 
-def closed_loop(p: Plant, seconds: float, seed: int, faster: float = 1.0) -> Recording:
+def closed_loop(p: Plant, seconds: float, seed: int, faster: float = 1.0,
+                inject: str | None = None, amplitude: float = 6.0) -> Recording:
     """``p`` under a 15 Hz PID position loop following a two-sine move (20 mm at 0.4 Hz,
-    4 mm at 1.7 Hz; ``faster`` scales both frequencies). The noise block's ``thrust_std``
-    is added to the recorded thrust (a sensor's noise: the loop applies its command)."""
+    4 mm at 1.7 Hz; ``faster`` scales both frequencies), with ``inject`` (an excitation
+    of ``amplitude`` N) added to the controller's output and recorded with it."""
     n = round(seconds * p.sample_rate_hz)
     ref = reference_trajectory(n, p.sample_rate_hz, (0.02, 0.004),
                                (0.4 * faster, 1.7 * faster))
     loop = PositionLoop.for_bandwidth(replace(p, noise=None), 15.0)
-    rec = run_closed_loop(p, ref, loop, seed=seed)
-    std = p.noise.thrust_std if p.noise is not None else 0.0
-    if std:
-        rng = np.random.default_rng(10_000 + seed)
-        rec = replace(rec, thrust=rec.thrust + std * rng.standard_normal(len(rec)))
-    return rec
+    exc = None if inject is None else make_excitation(inject, n, p.sample_rate_hz,
+                                                      seed=seed, amplitude_n=amplitude)
+    return run_closed_loop(p, ref, loop, seed=seed, injection=exc)

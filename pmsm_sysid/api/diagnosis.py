@@ -65,7 +65,8 @@ def _recording(data: RecordingLike, label: str, namespace: str | None) -> Record
 
 def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike | None = None,
              namespace: str | None = None, alpha: float = 1e-3, min_share: float = 0.01,
-             replay: bool = True, gfrf: bool = True) -> Diagnosis:
+             replay: bool = True, gfrf: bool = True, sim: RecordingLike | None = None,
+             sim_namespace: str | None = None) -> Diagnosis:
     """Name the physics a plant model leaves out, by comparing it with a real recording.
 
     Locates the mismatch (equation error of the inverse dynamics over time, position,
@@ -81,6 +82,17 @@ def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike |
     the mismatch an effect must explain), ``replay`` (short-horizon speed replay),
     ``gfrf`` (GFRF comparison with a noisy simulated twin).
 
+    ``sim``: instead of a plant, a recording of the user's own simulator (Gazebo, Isaac
+    Sim, MuJoCo, Simulink, ...; a :class:`Recording` or a bag path, read with
+    ``sim_namespace``); ``plant`` must then be None. Both recordings' plants are fitted
+    (:func:`fit_plant`) and compared parameter by parameter against the combined standard
+    error of both fits: ``to_dict()`` then holds ``reference: "sim_recording"``,
+    ``sim_plant``, ``effects`` (what the real drive has beyond the simulation), ``sim_only``
+    (what the simulation has that the real drive lacks), ``changes`` (one row per
+    parameter that differs) and the simulation's plant with the changes applied as
+    ``corrected_plant``. The two recordings may differ in excitation, length, sample rate,
+    loop, noise and topic layout.
+
     Example:
         >>> import pmsm_sysid as ps
         >>> d = ps.diagnose(None, "bags/paper_speed_coulomb", replay=False, gfrf=False)
@@ -88,24 +100,52 @@ def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike |
         ['coulomb_friction']
         >>> d.corrected.coulomb_friction is not None
         True
+        >>> d = ps.diagnose(None, "bags/paper_speed_coulomb", sim="bags/paper_speed_nominal",
+        ...                 replay=False, gfrf=False)
+        >>> d.to_dict()["reference"], [c["parameter"] for c in d.to_dict()["changes"]]
+        ('sim_recording', ['coulomb_friction.amplitude_n'])
     """
     from ..core.discrepancy import DiagnoseOptions
     from ..core.discrepancy import diagnose as run_diagnosis
-    from ..core.selection.datacheck import check_sampling
+    from ..core.discrepancy.against import diagnose_sim
 
     options = DiagnoseOptions(alpha=_checks.fraction("alpha", alpha),
                               min_share=_checks.fraction("min_share", min_share),
                               replay=bool(replay), gfrf=bool(gfrf))
-    model, label = resolve_plant(plant)
+    if sim is not None and plant is not None:
+        raise OptionError("give either a plant or a recording of the simulator (sim=), "
+                          "not both")
+    if sim is None:
+        model, label = resolve_plant(plant)
     rec = _recording(real, "real", namespace)
     held = None if validate is None else _recording(validate, "validate", namespace)
-    # derivatives, filters and replays assume one sampling grid: refuse gaps and rate changes
-    for name, given, r in (("real", real, rec), ("validate", validate, held)):
-        if r is not None:
-            where = given if isinstance(given, (str, os.PathLike)) else name
-            check_sampling(r.t, r.sample_rate_hz, f"recording {where}")
-    sources = {} if plant is None or isinstance(plant, Plant) else {"plant_file": label}
-    for key, value in (("real", real), ("validate", validate)):
+    sim_rec = None if sim is None else _recording(sim, "sim", sim_namespace)
+    _check_recordings((("real", real, rec), ("validate", validate, held), ("sim", sim, sim_rec)),
+                      identify=sim is not None)
+    sources = {}
+    if sim is None and plant is not None and not isinstance(plant, Plant):
+        sources["plant_file"] = label
+    for key, value in (("real", real), ("validate", validate), ("sim", sim)):
         if isinstance(value, (str, os.PathLike)):
             sources[key] = str(value)
+    if sim_rec is not None:
+        return Diagnosis(diagnose_sim(sim_rec, rec, held, options), rec, sources)
     return Diagnosis(run_diagnosis(model, rec, held, options), rec, sources)
+
+
+def _check_recordings(items: tuple[tuple[str, Any, Recording | None], ...],
+                      identify: bool) -> None:
+    """One sampling grid per recording (derivatives, filters and replays assume it); with
+    a simulator's recording, each must also be able to identify a plant."""
+    from ..core.plantfit.physical import check_identifiable
+    from ..core.selection.datacheck import check_sampling
+
+    for name, given, r in items:
+        if r is None:
+            continue
+        where = given if isinstance(given, (str, os.PathLike)) else name
+        label = {"sim": "simulated recording", "validate": "held-out recording"}.get(
+            name, "recording")
+        check_sampling(r.t, r.sample_rate_hz, f"{label} {where}")
+        if identify:
+            check_identifiable(r, f"{label} {where}")

@@ -1,4 +1,5 @@
-"""``pmsm-sysid diagnose --plant PLANT --real BAG``: what physics does the plant leave out?
+"""``pmsm-sysid diagnose (--plant PLANT | --sim SIM_BAG) --real BAG``: what physics does the
+simulation leave out?
 
 Locates the mismatch between the plant and the recording (equation error of inverse
 dynamics: over time, position, velocity, frequency), names the missing effects from a
@@ -7,6 +8,12 @@ Bonferroni correction, held-out confirmation), estimates their parameters with s
 errors, writes the corrected plant and shows the fit before/after on estimation and held-out
 data. Held-out data: ``--validate BAG2``, else the last 30 % of the recording. ``--json``
 writes the diagnose JSON; ``--report DIR`` writes figures and an index.html.
+
+With ``--sim SIM_BAG`` (a recording of the user's own simulator) instead of a plant file,
+the simulator's plant is fitted from its recording and the real recording's too; the two
+are compared parameter by parameter against both fits' errors (what the real drive has
+beyond the simulation, what the simulation has that the real drive lacks, each change in
+words), and the simulation's plant with the changes applied is the corrected plant.
 """
 
 from __future__ import annotations
@@ -25,13 +32,19 @@ OUTPUTS = {"json": "file", "corrected_plant": "file", "report": "report"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--plant", required=True, metavar="PLANT.yaml",
-                   help="the simulation's plant file")
+    ref = p.add_mutually_exclusive_group(required=True)
+    ref.add_argument("--plant", metavar="PLANT.yaml", help="the simulation's plant file")
+    ref.add_argument("--sim", metavar="SIM_BAG",
+                     help="a recording of the simulator instead of a plant file (rosbag2, "
+                          "topics or JointState; its plant is fitted from it)")
     p.add_argument("--real", required=True, metavar="BAG", help="the real recording (rosbag2)")
     p.add_argument("--validate", metavar="BAG2",
                    help="held-out recording (default: the last 30%% of --real)")
     p.add_argument("--namespace", type=ros_name, default=None,
-                   help="topic namespace or JointState topic (default: auto-detect)")
+                   help="topic namespace or JointState topic of --real and --validate "
+                        "(default: auto-detect)")
+    p.add_argument("--sim-namespace", type=ros_name, default=None,
+                   help="topic namespace or JointState topic of --sim (default: auto-detect)")
     p.add_argument("--alpha", type=parse_fraction, default=1e-3,
                    help="family-wise false-alarm level of each selection step (default 1e-3)")
     p.add_argument("--min-share", type=parse_fraction, default=0.01,
@@ -56,10 +69,12 @@ def run(args: argparse.Namespace) -> int:
     with activity("diagnose"):
         found = diagnose(args.plant, args.real, validate=args.validate,
                          namespace=args.namespace, alpha=args.alpha, min_share=args.min_share,
-                         replay=not args.no_replay, gfrf=not args.no_gfrf)
+                         replay=not args.no_replay, gfrf=not args.no_gfrf, sim=args.sim,
+                         sim_namespace=args.sim_namespace)
     real = found.real
     out = sys.stderr if args.json == "-" else sys.stdout
-    print(f"diagnose: plant {args.plant} vs recording {args.real} "
+    what = f"plant {args.plant}" if args.sim is None else f"simulator's recording {args.sim}"
+    print(f"diagnose: {what} vs recording {args.real} "
           f"({len(real)} samples at {real.sample_rate_hz:g} Hz"
           f"{', speed derived from position' if real.speed_derived else ''})", file=out)
     print(found.summary(), file=out)
@@ -71,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
         from ..validate import atomic_dir
 
         with atomic_dir(args.report, "--report") as tmp:  # complete, or none at all
-            index = write_report(found.result, tmp, title=f"{args.plant} vs {args.real}")
+            index = write_report(found.result, tmp,
+                                 title=f"{args.plant or args.sim} vs {args.real}")
         print(f"report: {Path(args.report) / Path(index).relative_to(tmp)}", file=out)
     return 0

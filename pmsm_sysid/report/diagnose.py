@@ -87,9 +87,13 @@ def json_sections(d: Mapping[str, Any]) -> list[Section]:
     found: list[Block] = [effects_table(d), fit_table(d)]
     found += [Note(str(n)) for n in d.get("notes") or []]
     plants: list[Block] = [_plant(d.get("plant") or {})]
-    return [Section("Sim-to-real: where the mismatch lives", tuple(summary)),
+    from .sidebyside import sim_sections
+
+    fitted = d.get("reference") == "sim_recording"
+    return [*sim_sections(d), Section("Sim-to-real: where the mismatch lives", tuple(summary)),
             Section("Sim-to-real: named effects and fit", tuple(found)),
-            Section("Nominal plant", tuple(plants)),
+            Section("Simulation's plant (fitted from its recording)" if fitted
+                    else "Nominal plant", tuple(plants)),
             Section("Corrected plant", (_plant(d.get("corrected_plant") or {}),))]
 
 
@@ -132,9 +136,19 @@ def rerun(d: Mapping[str, Any], json_path: Path) -> tuple[Any, str]:
     opts = DiagnoseOptions(alpha=float(method.get("alpha", defaults.alpha)),
                            min_share=float(method.get("min_share", defaults.min_share)),
                            replay=replay)
+    sim = _find(d.get("sim"), json_path)
+    if d.get("reference") == "sim_recording" and sim is None:
+        return None, f"the simulator's recording {d.get('sim')!r} is not there"
     try:
-        result = diagnose(plant_from_dict(d["plant"]), read_recording(real).recording,
-                          read_recording(val).recording if val else None, opts)
+        held = read_recording(val).recording if val else None
+        if sim is not None:
+            from ..core.discrepancy.against import diagnose_sim
+
+            result = diagnose_sim(read_recording(sim).recording,
+                                  read_recording(real).recording, held, opts)
+        else:
+            result = diagnose(plant_from_dict(d["plant"]), read_recording(real).recording,
+                              held, opts)
     except (PmsmSysidError, KeyError, TypeError, ValueError) as exc:
         return None, f"the diagnosis could not be repeated ({exc})"
     if not _same(d, result.to_dict()):

@@ -8,7 +8,7 @@ human report the CLI prints.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -16,6 +16,9 @@ from numpy.typing import NDArray
 from ..physics.plant import Plant, plant_to_dict
 from ..plantfit.found import FoundEffect, effect_line
 from .locate import AxisFinding
+
+if TYPE_CHECKING:
+    from .sidebyside import SimComparison
 
 FloatArray = NDArray[np.float64]
 
@@ -47,9 +50,13 @@ class DiagnoseResult:
     notes: tuple[str, ...] = ()
     curves: Curves = field(default_factory=Curves)
     gfrf: dict[str, Any] | None = None  # the GFRF comparison's mismatch.where entry
+    against: SimComparison | None = None
+    """Set when the reference is a simulator's recording (its fitted plant is ``plant``)."""
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        extra = self.against.to_dict() if self.against is not None \
+            else {"reference": "plant_file"}
+        return {**extra,
             "plant": plant_to_dict(self.plant),
             "mismatch": {"nrmse_before": self.nrmse_before,
                          "where": [w.to_dict() for w in self.where]
@@ -64,14 +71,21 @@ class DiagnoseResult:
 
     def summary(self) -> str:
         """A few lines for people: found effects, fit before/after, where it lived."""
-        lines = [f"equation-error NRMSE of the nominal plant: {self.nrmse_before:.4f}"]
+        what = "the nominal plant" if self.against is None else "the simulation's plant"
+        lines = self.against.summary_lines() if self.against is not None else []
+        lines.append(f"equation-error NRMSE of {what}: {self.nrmse_before:.4f}")
         named = [e for e in self.effects if e.name != "unexplained"]
         if not named:
             lines.append("no significant missing physics"
                          + (" in the library" if self.effects else ""))
+        elif self.against is not None:
+            lines.append("what the real drive has beyond the simulation:")
         for e in self.effects:
             lines.append(effect_line(e))
             lines += [f"    note: {n}" for n in e.notes]
+        if self.against is not None and self.against.sim_only:
+            lines.append("what the simulation has that the real drive lacks:")
+            lines += [effect_line(e) for e in self.against.sim_only]
         for seg in ("estimation", "validation"):
             f = self.fit.get(seg)
             if f:

@@ -57,14 +57,23 @@ def reference_trajectory(n: int, fs: float, amplitudes_m: tuple[float, ...],
 
 
 def run_closed_loop(plant: Plant, reference: ArrayLike, loop: PositionLoop, seed: int = 0,
-                    disturbance: ArrayLike | None = None) -> Recording:
-    """Simulate the loop following ``reference`` (m, one value per sample)."""
+                    disturbance: ArrayLike | None = None,
+                    injection: ArrayLike | None = None) -> Recording:
+    """Simulate the loop following ``reference`` (m, one value per sample).
+
+    ``injection`` (N per sample) is added to the controller's output and recorded with it
+    (an identification signal injected into the loop); the recorded thrust carries the
+    plant's thrust-sensor noise (``noise.thrust_std``) as in open loop.
+    """
     xr = np.asarray(reference, dtype=np.float64)
     if xr.ndim != 1 or len(xr) < 3 or not np.isfinite(xr).all():
         raise DataError("the reference must be a finite 1-D array of at least 3 samples")
     d = np.zeros(len(xr)) if disturbance is None else np.asarray(disturbance, dtype=np.float64)
     if d.shape != xr.shape:
         raise DataError(f"disturbance has {d.shape} samples, reference {xr.shape}")
+    inj = np.zeros(len(xr)) if injection is None else np.asarray(injection, dtype=np.float64)
+    if inj.shape != xr.shape or not np.isfinite(inj).all():
+        raise DataError(f"injection must be finite with {len(xr)} samples, got {inj.shape}")
     fs = plant.sample_rate_hz
     vr = np.gradient(xr) * fs
     sim = MotorSimulator(plant, seed=seed, x0=float(xr[0]))
@@ -75,9 +84,10 @@ def run_closed_loop(plant: Plant, reference: ArrayLike, loop: PositionLoop, seed
         speed[k], position[k] = sim.measure()
         err = xr[k] - position[k]
         integral += err / fs
-        thrust[k] = (loop.kp_n_per_m * err + loop.kd_n_s_per_m * (vr[k] - speed[k])
-                     + loop.ki_n_per_m_s * integral)
-        sim.advance(thrust[k] + d[k])
+        command = (loop.kp_n_per_m * err + loop.kd_n_s_per_m * (vr[k] - speed[k])
+                   + loop.ki_n_per_m_s * integral + inj[k])
+        thrust[k] = sim.measured_thrust(command)
+        sim.advance(command + d[k])
     meta = {"plant": dump_plant(plant), "seed": str(seed), "simulator": "pmsm_sysid.physics",
             "control": f"PID kp={loop.kp_n_per_m:.6g} kd={loop.kd_n_s_per_m:.6g} "
                        f"ki={loop.ki_n_per_m_s:.6g}"}
