@@ -12,7 +12,6 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
-
 from pmsm_sysid.core.physics.closed_loop import (
     PositionLoop,
     reference_trajectory,

@@ -6,6 +6,7 @@ in the metadata, so ``ros2 bag info``, Foxglove and a plain ``rosbags`` ``AnyRea
 them without this package.
 
 - :func:`write_recording` / :func:`read_recording`: whole recordings (the three input topics);
+  :func:`write_joint_states`: the same as one ros2_control ``JointState`` topic;
 - :func:`iter_raw`, :func:`bag_topics`: serialized messages in log order, for replay;
 - :class:`BagRecorder`, :func:`repair`: streaming recording that survives being killed;
 - :func:`typestore`: ROS 2 Jazzy types plus the package's ``msg_schemas`` as
@@ -25,6 +26,7 @@ from .common import (
     storage_plugin,
     typestore,
 )
+from .joint_write import write_joint_states
 from .read import bag_topics, iter_raw, read_recording
 from .recorder import BagRecorder, repair, sigterm_as_exit
 from .schemas import encode_model_msg, encode_ridges_msg, encode_validation_msg
@@ -34,5 +36,5 @@ __all__ = [
     "DEFAULT_QOS", "FRAME_ID", "BagRecorder", "LoadedRecording", "RawMessage", "bag_topics",
     "connection_args", "encode_model_msg", "encode_ridges_msg", "encode_validation_msg",
     "iter_raw", "open_reader", "read_recording", "repair", "schema_dir", "sigterm_as_exit",
-    "storage_plugin", "typestore", "write_recording",
+    "storage_plugin", "typestore", "write_joint_states", "write_recording",
 ]

@@ -151,32 +151,38 @@ class Judged:
 
 def _judge(rows: list[Change], sim_plant: Plant, real_est: Plant, pf: PhysicalFit,
            before: dict[str, EquationData]) -> Judged:
-    """Each effect's changes applied alone to the simulation's plant (real values estimated
-    on the estimation part): its share of the mismatch on the estimation data, and the
-    held-out test (Diebold-Mariano) of the force error on the held-out real data. As in
-    ``diagnose``, an effect whose changes do not lower the held-out error is not reported;
-    one that lowers it by no more than chance would is 'low'; 'high' needs p < 0.001."""
-    shares: dict[str, float] = {}
-    held: dict[str, HeldOutTest] = {}
-    parts: dict[str, list[tuple[str, Any]]] = {s: [] for s in SEGMENTS}
-    kept, notes = [], []
+    """Each effect's changes judged on held-out real data, as ``diagnose`` judges effects:
+    the simulation's plant with every change applied (real values estimated on the
+    estimation part) against the same without this effect's changes (Diebold-Mariano on
+    the force error). The weakest effect that does not lower the held-out error is
+    dropped and the rest judged again; one that lowers it by no more than chance would is
+    'low', 'high' needs p < 0.001. Its share of the mismatch is that of its changes alone."""
+    notes: list[str] = []
+    kept = list(rows)
+    while True:
+        by = groups(kept)
+        y_all = {s: _data(apply_changes(sim_plant, real_est, kept), pf, s).y for s in SEGMENTS}
+        minus = {n: {s: _data(apply_changes(sim_plant, real_est, [r for r in kept
+                                                                  if r.effect != n]), pf, s).y
+                     for s in SEGMENTS} for n in by}
+        tests = {n: held_out_test(minus[n]["validation"], y_all["validation"]) for n in by}
+        failing = [(t.z, n) for n, t in tests.items() if not t.confirmed]
+        if not failing:
+            break
+        _, worst = min(failing)
+        notes.append(f"{worst}: the change does not lower the force error on held-out real "
+                     f"data (mean-square error {-tests[worst].reduction:+.0%}); it is not "
+                     "reported")
+        kept = [r for r in kept if r.effect != worst]
     e0 = float(before["estimation"].y @ before["estimation"].y)
-    for name, rs in groups(rows).items():
-        p = apply_changes(sim_plant, real_est, rs)
-        y = {seg: _data(p, pf, seg).y for seg in SEGMENTS}
-        test = held_out_test(before["validation"].y, y["validation"])
-        if not test.confirmed:
-            notes.append(f"{name}: the change does not lower the force error on held-out real "
-                         f"data (mean-square error {-test.reduction:+.0%}); it is not reported")
-            continue
-        for seg in SEGMENTS:
-            parts[seg].append((name, before[seg].y - y[seg]))
-        shares[name] = max(0.0, 1.0 - float(y["estimation"] @ y["estimation"]) / e0) \
-            if e0 > 0 else 0.0
-        held[name] = test
-        kept += [replace(r, confidence=_held_confidence(r.confidence, test.p_value))
-                 for r in rs]
-    return Judged(kept, held, shares, parts, notes)
+    shares = {}
+    for n, rs in by.items():
+        y = _data(apply_changes(sim_plant, real_est, rs), pf, "estimation").y
+        shares[n] = max(0.0, 1.0 - float(y @ y) / e0) if e0 > 0 else 0.0
+    parts = {s: [(n, minus[n][s] - y_all[s]) for n in by] for s in SEGMENTS}
+    kept = [replace(r, confidence=_held_confidence(r.confidence, tests[r.effect].p_value))
+            for r in kept]
+    return Judged(kept, tests, shares, parts, notes)
 
 
 def _held_confidence(confidence: str, p_value: float) -> str:
