@@ -140,6 +140,48 @@ def test_wall_clock_stamps_are_regular_and_current(ros_context: Any) -> None:
     assert [s for s, _ in col.data["thrust"]] == stamps.tolist()
 
 
+def test_wall_clock_starts_with_the_first_sample_after_a_hold(ros_context: Any) -> None:
+    """A sim held after it was created (as ``run --record`` holds it until the recorder is
+    ready) stamps its first sample when it publishes it, not when it was created: every stamp
+    is the wall time of its sample, so a recording cut by a crash ends at the crash. Both
+    bounds are orderings of events (released before the first stamp, each stamp before its
+    reception), not durations."""
+    from geometry_msgs.msg import TwistStamped
+    from rclpy.executors import SingleThreadedExecutor
+
+    from pmsm_sysid.nodes.sim_node import MotorSimNode
+    from pmsm_sysid.rosutil import data_qos
+
+    ns = _unique_ns()
+    col = Collector(ros_context, ns)
+    received: list[int] = []
+    col.node.create_subscription(TwistStamped, f"{ns}/speed",  # when each speed arrives
+                                 lambda _m: received.append(time.time_ns()), data_qos())
+    ex = SingleThreadedExecutor(context=ros_context)
+    ex.add_node(col.node)
+    sim = MotorSimNode(context=ros_context, max_samples=100, namespace=ns,
+                       cli_args=_remap_clock(ns))
+    try:
+        sim.stop_timer()
+        ex.add_node(sim)
+        _wait_matched(ex, sim)
+        held = time.monotonic()
+        _spin_until(ex, lambda: time.monotonic() - held > 0.3)  # held: nothing published
+        assert sim.published == 0
+        released = time.time_ns()
+        sim.start_timer()
+        _spin_until(ex, lambda: col.count() >= 100 and len(received) >= 100)
+    finally:
+        ex.shutdown()
+        sim.destroy_node()
+        col.node.destroy_node()
+    stamps, _ = col.arrays("speed")
+    assert np.all(np.diff(stamps) == 2_000_000)
+    assert stamps[0] >= released
+    slew_ns = 1_000_000  # the wall clock may be slewed against the monotonic one that paces
+    assert np.all(stamps <= np.array(received[:100]) + slew_ns)
+
+
 def test_parameters_round_trip_a_plant_file() -> None:
     plant = load_plant(COGGING)
     flat = plant_parameters(plant)

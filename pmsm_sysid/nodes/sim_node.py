@@ -11,8 +11,10 @@ equal the offline simulation of the same plant and seed bit for bit):
    ``header.stamp = t_k`` (and ``/clock = t_k`` first with the sim clock);
 4. ``sim.advance(u)`` — u held over [t_k, t_{k+1}).
 
-Clock (parameter ``clock``): ``wall`` stamps t_k = start time + k/fs (a drift-free sample
-clock) and paces samples to real time, catching up in bursts when the timer is late, never
+Clock (parameter ``clock``): ``wall`` stamps t_k = t_0 + k/fs (a drift-free sample clock
+started when the first sample is published, however long the node was held before: the
+stamps are the wall time of each sample, which a recording of a crash relies on) and paces
+samples to real time, catching up in bursts when the timer is late, never
 skipping a sample; ``sim`` stamps t_k = k/fs exactly as ``simulate`` does, publishes
 ``/clock`` and runs at ``rate`` x real time, or with ``rate: 0.0`` as fast as the executor
 allows: ``burst`` samples (default 1) per executor round. rclpy's executors take one message
@@ -268,11 +270,19 @@ class MotorSimNode(Node):
         rate = self.values["rate"]
         return 0.0 if rate == 0.0 else max(1.0 / (rate * self.fs), 0.0005)
 
+    def _start_wall_clock(self) -> None:
+        """Wall clock, before the first sample: stamps and pacing start now."""
+        self._t0_ns = time.time_ns()
+        self._pace_start = (time.monotonic(), 0)
+
     def _on_timer(self) -> None:
         if self.finished:
             self._timer.cancel()  # type: ignore[no-untyped-call]
             return
-        rate = 1.0 if self.values["clock"] == "wall" else self.values["rate"]
+        wall = self.values["clock"] == "wall"
+        if wall and self.published == 0:
+            self._start_wall_clock()
+        rate = 1.0 if wall else self.values["rate"]
         if rate == 0.0:
             self.step(self.values["burst"])
             return
