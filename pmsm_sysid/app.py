@@ -298,7 +298,7 @@ def build_pipeline(
                 made[name] = _make_checked(name, ctx, opts)
                 executor.add_node(made[name])
             if record is not None:  # the sim here is held until it records
-                pipe.recorder = _recorder(ctx, record, namespace)
+                pipe.recorder = _recorder(ctx, record, namespace, pipe.identifier)
                 _wait_for_recorder(pipe, MATCH_S)
             if pipe.stepped:
                 pipe.sim.stop_timer()  # stepped by the pipeline (back-pressure)
@@ -348,12 +348,15 @@ def _wait_until_matched(sim: Any, executor: SingleThreadedExecutor, wait_s: floa
         sim.start_timer()
 
 
-def _recorder(ctx: Context, path: str, namespace: str) -> Any:
+def _recorder(ctx: Context, path: str, namespace: str, identifier: Any = None) -> Any:
     """A recorder process (inputs and identification outputs) writing a new bag at
-    ``path`` on the context's domain."""
+    ``path`` on the context's domain; the inputs are the topics the ``identifier`` here
+    listens to (e.g. a robot's JointState topic), else the three under ``namespace``."""
     from .nodes.recorder_process import RecorderProcess
 
-    return RecorderProcess(path, namespace=namespace, domain_id=ctx.get_domain_id())
+    inputs = identifier.input_topic_types if identifier is not None else None
+    return RecorderProcess(path, namespace=namespace, domain_id=ctx.get_domain_id(),
+                           inputs=inputs)
 
 
 def _wait_for_recorder(pipe: Pipeline, timeout_s: float) -> bool:

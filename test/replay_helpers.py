@@ -29,7 +29,8 @@ class Replayed:
 def replay_into_pipeline(bag: Path, env: dict[str, str], ctx: Any, n_samples: int, *,
                          replay_args: tuple[str, ...] = (), deadline_s: float = 180,
                          **pipeline: Any) -> Replayed:
-    """``replay BAG`` in its own process into identifier + GFRF nodes on ``ctx``; returns once
+    """``replay BAG`` in its own process into identifier + GFRF nodes on ``ctx`` (None: a
+    context of the pipeline's own, e.g. with ``ros_args`` and ``domain_id``); returns once
     the replay ended and the identifier holds ``n_samples`` (completion conditions; the
     deadline only stops a hung run)."""
     from pmsm_sysid.app import build_pipeline
@@ -52,6 +53,35 @@ def replay_into_pipeline(bag: Path, env: dict[str, str], ctx: Any, n_samples: in
         collector = pipe.nodes["collector"]
         return Replayed(pipe.summary(), list(collector.model_log),
                         {r["model_id"]: r for r in collector.ridges_log}, out)
+
+
+def write_joint_state_bag(rec: Any, path: Path, *, topic: str = "/joint_states",
+                          joints: tuple[str, ...] = ("axis",), axis: str = "axis") -> Path:
+    """``rec`` as ros2_control's joint_state_broadcaster records it: one
+    ``sensor_msgs/JointState`` per sample on ``topic`` with every joint of ``joints``, the
+    axis's ``effort``/``velocity``/``position`` = thrust/speed/position (the other joints
+    carry other values), written with the stock ``rosbags`` typestore only."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    js, header, time_t = (store.types[n] for n in (
+        "sensor_msgs/msg/JointState", "std_msgs/msg/Header", "builtin_interfaces/msg/Time"))
+    k = joints.index(axis)
+    stamps = np.round(np.asarray(rec.t) * 1e9).astype(np.int64)
+    with Writer(path, version=9) as w:
+        conn = w.add_connection(topic, "sensor_msgs/msg/JointState", typestore=store)
+        for i, ns in enumerate(stamps.tolist()):
+            values = [np.full(len(joints), 0.5 * i) for _ in range(3)]
+            for arr, v in zip(values, (rec.position[i], rec.speed[i], rec.thrust[i]),
+                              strict=True):
+                arr[k] = v
+            msg = js(header=header(stamp=time_t(sec=ns // 10**9, nanosec=ns % 10**9),
+                                   frame_id=""),
+                     name=list(joints), position=values[0], velocity=values[1],
+                     effort=values[2])
+            w.write(conn, ns, store.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
+    return path
 
 
 def assert_live_equals_offline(model: dict[str, Any], rec: Any, a: int, b: int) -> dict[str, Any]:

@@ -43,8 +43,8 @@ class _Source:
         self.node = Node("test_source", context=ctx)
         self._make = make_sample_messages
         if joint:
-            self.pub = self.node.create_publisher(
-                JointState, f"{DEFAULT_NAMESPACE}/joint_states", data_qos())
+            # where ros2_control's joint_state_broadcaster publishes: the root namespace
+            self.pub = self.node.create_publisher(JointState, "/joint_states", data_qos())
         else:
             self.pubs = {s: self.node.create_publisher(type(m), input_topic(DEFAULT_NAMESPACE, s),
                                                        data_qos())

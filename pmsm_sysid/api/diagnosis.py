@@ -53,20 +53,22 @@ class Diagnosis:
         return out
 
 
-def _recording(data: RecordingLike, label: str, namespace: str | None) -> Recording:
+def _recording(data: RecordingLike, label: str, namespace: str | None,
+               joint: str | None = None) -> Recording:
     if isinstance(data, Recording):
         return data
     if isinstance(data, (str, os.PathLike)):
         from .recordings import read_bag
 
-        return read_bag(data, namespace)
+        return read_bag(data, namespace, joint=joint)
     raise OptionError(f"{label} must be a Recording or a bag path, got {type(data).__name__}")
 
 
 def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike | None = None,
              namespace: str | None = None, alpha: float = 1e-3, min_share: float = 0.01,
              replay: bool = True, gfrf: bool = True, sim: RecordingLike | None = None,
-             sim_namespace: str | None = None) -> Diagnosis:
+             sim_namespace: str | None = None, joint: str | None = None,
+             sim_joint: str | None = None) -> Diagnosis:
     """Name the physics a plant model leaves out, by comparing it with a real recording.
 
     Locates the mismatch (equation error of the inverse dynamics over time, position,
@@ -77,21 +79,22 @@ def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike |
 
     ``plant``: a :class:`Plant`, a plant YAML path, or None (the nominal motor). ``real``
     and ``validate``: :class:`Recording` objects or bag paths (``validate`` is held-out data;
-    default: the last 30 % of ``real``). Options as ``pmsm-sysid diagnose``: ``alpha``
-    (family-wise false-alarm level of each selection step), ``min_share`` (smallest share of
-    the mismatch an effect must explain), ``replay`` (short-horizon speed replay),
-    ``gfrf`` (GFRF comparison with a noisy simulated twin).
+    default: the last 30 % of ``real``; ``namespace`` and ``joint`` as in :func:`read_bag`).
+    Options as ``pmsm-sysid diagnose``: ``alpha`` (family-wise false-alarm level of each
+    selection step), ``min_share`` (smallest share of the mismatch an effect must explain),
+    ``replay`` (short-horizon speed replay), ``gfrf`` (GFRF comparison with a noisy
+    simulated twin).
 
     ``sim``: instead of a plant, a recording of the user's own simulator (Gazebo, Isaac
     Sim, MuJoCo, Simulink, ...; a :class:`Recording` or a bag path, read with
-    ``sim_namespace``); ``plant`` must then be None. Both recordings' plants are fitted
-    (:func:`fit_plant`) and compared parameter by parameter against the combined standard
-    error of both fits: ``to_dict()`` then holds ``reference: "sim_recording"``,
-    ``sim_plant``, ``effects`` (what the real drive has beyond the simulation), ``sim_only``
-    (what the simulation has that the real drive lacks), ``changes`` (one row per
-    parameter that differs) and the simulation's plant with the changes applied as
-    ``corrected_plant``. The two recordings may differ in excitation, length, sample rate,
-    loop, noise and topic layout.
+    ``sim_namespace`` and ``sim_joint``); ``plant`` must then be None. Both recordings'
+    plants are fitted (:func:`fit_plant`) and compared parameter by parameter against the
+    combined standard error of both fits: ``to_dict()`` then holds ``reference:
+    "sim_recording"``, ``sim_plant``, ``effects`` (what the real drive has beyond the
+    simulation), ``sim_only`` (what the simulation has that the real drive lacks),
+    ``changes`` (one row per parameter that differs) and the simulation's plant with the
+    changes applied as ``corrected_plant``. The two recordings may differ in excitation,
+    length, sample rate, loop, noise and topic layout.
 
     Example:
         >>> import pmsm_sysid as ps
@@ -117,9 +120,9 @@ def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike |
                           "not both")
     if sim is None:
         model, label = resolve_plant(plant)
-    rec = _recording(real, "real", namespace)
-    held = None if validate is None else _recording(validate, "validate", namespace)
-    sim_rec = None if sim is None else _recording(sim, "sim", sim_namespace)
+    rec = _recording(real, "real", namespace, joint)
+    held = None if validate is None else _recording(validate, "validate", namespace, joint)
+    sim_rec = None if sim is None else _recording(sim, "sim", sim_namespace, sim_joint)
     _check_recordings((("real", real, rec), ("validate", validate, held), ("sim", sim, sim_rec)),
                       identify=sim is not None)
     sources = {}

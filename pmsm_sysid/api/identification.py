@@ -79,11 +79,13 @@ def identify(data: DataLike, *, output: str = "speed", input: str = "thrust",
              validate: tuple[int, int] | None = (3000, 4000),
              criterion: str = "terms", rho: float = 1e-3, method: str = "iofr",
              constant: bool = True, keep_dc: bool = False, corr_lags: int = 20,
-             namespace: str | None = None, form: str = "level") -> Identification:
+             namespace: str | None = None, form: str = "level",
+             joint: str | None = None) -> Identification:
     """Identify a polynomial NARX model of ``output`` driven by thrust, by orthogonal forward
     regression (error reduction ratio), and validate it.
 
-    ``data``: a rosbag2 path (read with :func:`read_bag`, ``namespace`` as there) or a
+    ``data``: a rosbag2 path (read with :func:`read_bag`, ``namespace`` and ``joint`` as
+    there) or a
     :class:`Recording`. The options are those of ``pmsm-sysid identify``: ``ny``/``nu``
     output and input lags, ``degree`` (1-3), ``terms`` (the number, or the maximum for
     ``criterion`` ``err``/``aic``/``bic``), input ``delay``, ``estimate`` and ``validate``
@@ -127,7 +129,8 @@ def identify(data: DataLike, *, output: str = "speed", input: str = "thrust",
 
         ranges = {"estimation": est, **({"validation": val} if val is not None else {})}
         # read only as far as the ranges need: a short window of a long recording stays cheap
-        loaded = load_bag(data, namespace, until_sample=max(r[1] for r in ranges.values()))
+        loaded = load_bag(data, namespace, until_sample=max(r[1] for r in ranges.values()),
+                          joint=joint)
         check_ranges_finite(loaded, ranges, config.structure.max_lag)
         rec, alignment = loaded.recording, loaded.report
         source = str(Path(data).resolve())

@@ -18,7 +18,7 @@ STORAGES = ("mcap", "sqlite3")
 
 
 def load_bag(path: PathLike, namespace: str | None = None,
-             until_sample: int | None = None) -> LoadedRecording:
+             until_sample: int | None = None, joint: str | None = None) -> LoadedRecording:
     """The recording of a bag together with how its streams were aligned (for the CLI);
     ``until_sample``: only the samples before it are needed (reading may stop after them)."""
     from ..bagio import read_recording
@@ -26,17 +26,24 @@ def load_bag(path: PathLike, namespace: str | None = None,
 
     if namespace is not None:
         check_namespace(namespace, "namespace")
-    return read_recording(Path(path), namespace=namespace, until_sample=until_sample)
+    if joint is not None and not (isinstance(joint, str) and joint):
+        raise OptionError(f"joint must be a joint name, got {joint!r}")
+    return read_recording(Path(path), namespace=namespace, until_sample=until_sample,
+                          joint_name=joint)
 
 
-def read_bag(path: PathLike, namespace: str | None = None) -> Recording:
+def read_bag(path: PathLike, namespace: str | None = None, *,
+             joint: str | None = None) -> Recording:
     """Read the thrust, speed and position of one motor axis from a rosbag2 recording.
 
     The bag holds ``<namespace>/thrust`` (``geometry_msgs/WrenchStamped``),
     ``<namespace>/speed`` (``TwistStamped``, optional: derived from position when absent) and
     ``<namespace>/position`` (``PointStamped``), or one ``sensor_msgs/JointState`` topic.
     Samples are aligned on ``header.stamp``. ``namespace=None`` finds the topics by
-    themselves; name it when a bag holds several axes.
+    themselves; name it when a bag holds several axes. A ``JointState`` topic (as
+    ros2_control's joint_state_broadcaster records it) carrying several joints needs
+    ``joint``, the name of the axis's joint: its ``effort`` is the thrust, ``velocity`` the
+    speed and ``position`` the position.
 
     Returns a :class:`Recording` with equal-length numpy arrays ``t`` (s), ``thrust`` (N),
     ``speed`` (m/s), ``position`` (m) and the float ``sample_rate_hz``.
@@ -52,7 +59,7 @@ def read_bag(path: PathLike, namespace: str | None = None) -> Recording:
         >>> rec.speed.dtype
         dtype('float64')
     """
-    return load_bag(path, namespace).recording
+    return load_bag(path, namespace, joint=joint).recording
 
 
 def write_bag(recording: Recording, path: PathLike, *, namespace: str = "/pmsm",

@@ -161,9 +161,8 @@ def _read_joint(path: Path, reader: Any, topic: str, joint_name: str | None,
         if _enough({s: streams[s] for s in (tp.THRUST, tp.POSITION)}, until):
             break
     if joint_name is None and len(seen) > 1:
-        raise BagError(f"{path}: {topic} carries joints {', '.join(sorted(seen))}; reading "
-                       "one joint of several is possible from Python only: "
-                       "read_recording(..., joint_name=...)")
+        raise BagError(f"{path}: {topic} carries joints {', '.join(sorted(seen))}; say which "
+                       f"is the axis, e.g. --joint {sorted(seen)[0]} (API: joint=)")
     if not streams[tp.POSITION][0]:
         what = f"joint '{joint_name}'" if joint_name else "a single joint"
         names = ", ".join(sorted(seen)) or "none"
@@ -218,6 +217,9 @@ def read_recording(
             streams = _read_joint(path, reader, layout["joint_state"], joint_name, until_sample)
             used = {layout["joint_state"]: tp.JOINT_STATE_TYPE}
         else:
+            if joint_name is not None:
+                raise BagError(f"{path}: a joint was named ('{joint_name}') but the inputs are "
+                               f"{', '.join(layout.values())}, not a JointState topic")
             streams = _read_triple(reader, layout, until_sample)
             used = {topic: found[topic] for topic in layout.values()}
             empty = [layout[s] for s in (tp.THRUST, tp.POSITION) if not streams[s][0]]

@@ -45,6 +45,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(default: auto-detect)")
     p.add_argument("--sim-namespace", type=ros_name, default=None,
                    help="topic namespace or JointState topic of --sim (default: auto-detect)")
+    p.add_argument("--joint", metavar="NAME", default=None,
+                   help="JointState recordings of several joints (ros2_control): the axis's "
+                        "joint in --real and --validate")
+    p.add_argument("--sim-joint", metavar="NAME", default=None,
+                   help="the same for --sim")
     p.add_argument("--alpha", type=parse_fraction, default=1e-3,
                    help="family-wise false-alarm level of each selection step (default 1e-3)")
     p.add_argument("--min-share", type=parse_fraction, default=0.01,
@@ -70,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
         found = diagnose(args.plant, args.real, validate=args.validate,
                          namespace=args.namespace, alpha=args.alpha, min_share=args.min_share,
                          replay=not args.no_replay, gfrf=not args.no_gfrf, sim=args.sim,
-                         sim_namespace=args.sim_namespace)
+                         sim_namespace=args.sim_namespace, joint=args.joint,
+                         sim_joint=args.sim_joint)
     real = found.real
     out = sys.stderr if args.json == "-" else sys.stdout
     what = f"plant {args.plant}" if args.sim is None else f"simulator's recording {args.sim}"

@@ -88,6 +88,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--namespace", type=ros_name, default=None,
                    help="input namespace (e.g. /pmsm) or JointState topic, for a bag that "
                         "holds several (default: found by itself)")
+    p.add_argument("--joint", metavar="NAME", default=None,
+                   help="JointState recordings of several joints (ros2_control): the axis's "
+                        "joint")
     add_model_options(p)
     p.add_argument("--json", metavar="FILE", help="write the result as JSON ('-' = stdout)")
     p.add_argument("--quiet", action="store_true",
@@ -142,7 +145,8 @@ def run(args: argparse.Namespace) -> int:
     from ..progress import activity
 
     with activity("identify"):
-        fit = identify(args.bag, namespace=args.namespace, **model_options(args))
+        fit = identify(args.bag, namespace=args.namespace, joint=args.joint,
+                       **model_options(args))
     d = fit.to_dict()
     out = sys.stderr if args.json == "-" else sys.stdout
     _alignment_note(fit.alignment, out)

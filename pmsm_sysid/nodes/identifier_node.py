@@ -3,8 +3,9 @@
 The node lives in the pipeline's namespace ``<ns>`` (default ``/pmsm``: node
 ``/pmsm/pmsm_identifier``) and every topic name below is relative to it. Subscribes to
 ``<ns>/thrust|speed|position`` or, with ``input_layout: joint_state``, to one
-``sensor_msgs/JointState`` topic (``joint_state_topic``, default ``<ns>/joint_states``;
-``effort``/``velocity``/``position`` of ``joint_name``). The work is done by
+``sensor_msgs/JointState`` topic (``joint_state_topic``, default ``/joint_states``, where
+ros2_control's joint_state_broadcaster publishes; ``effort``/``velocity``/``position`` of
+``joint_name``; a namespaced robot: set the topic or remap ``/joint_states``). The work is done by
 :class:`pmsm_sysid.core.online.engine.OnlineEngine` (alignment,
 window ring, fitting thread) around :class:`pmsm_sysid.core.online.tracker.WindowTracker` (fits,
 cross-validation, change detection), which runs in a worker process of its own (parameter
@@ -46,7 +47,15 @@ from ..core.online.streaming import Window
 from ..core.online.tracker import TrackerConfig, WindowResult, WindowTracker, tracker_config
 from ..core.online.workerproc import ProcessWorker
 from ..rosutil import data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
-from ..topics import CHANGE, DEFAULT_NAMESPACE, INPUT_TYPES, MODEL, VALIDATION
+from ..topics import (
+    CHANGE,
+    DEFAULT_NAMESPACE,
+    INPUT_TYPES,
+    JOINT_STATE_TYPE,
+    MODEL,
+    THRUST,
+    VALIDATION,
+)
 from .health import HealthPublisher, IdentifierHealth
 from .numbers import NumberPublisher
 from .params import (
@@ -64,7 +73,7 @@ DRAIN_ROUNDS = 100  # at most 300 input messages taken per subscription callback
 #: Parameters and their defaults (paper structures: speed ny=30 nu=40, position ny=10 nu=10;
 #: position as its increment per sample, linear: bounded in free run).
 DEFAULTS: dict[str, Any] = {
-    "input_layout": "topics", "joint_name": "", "joint_state_topic": "joint_states",
+    "input_layout": "topics", "joint_name": "", "joint_state_topic": "/joint_states",
     "window": 1000, "hop": 250, "queue_size": 1, "sample_rate_hz": 0.0, "tolerance_s": 0.0,
     "outputs": ["speed", "position"], "method": "ofr", "criterion": "terms",
     "speed.ny": 30, "speed.nu": 40, "speed.degree": 2, "speed.delay": 1, "speed.terms": 15,
@@ -200,6 +209,13 @@ class IdentifierNode(Node):
             return dict.fromkeys(INPUT_TYPES,
                                  self.resolve_topic_name(str(p["joint_state_topic"])))
         return {sig: self.resolve_topic_name(sig) for sig in INPUT_TYPES}
+
+    @property
+    def input_topic_types(self) -> dict[str, str]:
+        """topic -> message type of the topics the samples come from (remaps applied)."""
+        if self.params["input_layout"] == "joint_state":
+            return {self._input_topics[THRUST]: JOINT_STATE_TYPE}
+        return {self._input_topics[sig]: t for sig, t in INPUT_TYPES.items()}
 
     def _speed_published(self) -> bool:
         """Someone publishes the speed topic (then its messages are worth waiting for)."""

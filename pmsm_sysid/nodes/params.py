@@ -113,8 +113,10 @@ IDENTIFIER_SPECS: dict[str, Spec] = {
                          "or 'joint_state' (one sensor_msgs/JointState topic)", read_only=True),
     "joint_name": Spec("joint_state layout: the joint whose effort, velocity and position are "
                        "thrust (N), speed (m/s) and position (m)", read_only=True),
-    "joint_state_topic": Spec("joint_state layout: the JointState topic (a relative name is "
-                              "in the node's namespace)", read_only=True),
+    "joint_state_topic": Spec("joint_state layout: the JointState topic (default "
+                              "/joint_states, where ros2_control's joint_state_broadcaster "
+                              "publishes; a relative name is in the node's namespace)",
+                              read_only=True),
     "window": Spec("samples per fitted window (from the next window on)", 2, BIG),
     "hop": Spec("samples between two fits: a window is cut every hop samples "
                 "(at most window)", 1, BIG),

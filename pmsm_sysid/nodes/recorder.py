@@ -2,8 +2,9 @@
 
 - Topics: by default the inputs, the identification outputs and their plottable numbers under
   the namespace (``<ns>/thrust``, ``<ns>/model``, ``<ns>/stats/speed/free_run_r2``, ...; the
-  node itself is ``<ns>/pmsm_record``); with ``topics`` exactly those (relative names are
-  resolved in the namespace). Topics of known type are subscribed at
+  node itself is ``<ns>/pmsm_record``); ``inputs`` (topic -> type) replaces the three input
+  topics, e.g. by the ``JointState`` topic an identifier listens to; with ``topics`` exactly
+  those (relative names are resolved in the namespace). Topics of known type are subscribed at
   once (nothing published after the recorder starts is missed); others when they show up in
   the ROS graph, with the type and reliability their publishers offer.
 - QoS: reliable, keep-last ``depth`` (default 10000 per topic, 20 s at 500 Hz) so bursts from a
@@ -21,7 +22,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from rclpy.context import Context
@@ -46,12 +47,13 @@ STAT_OUTPUTS = ("speed", "position")  # outputs whose plottable numbers are reco
 DRAIN_ROUNDS = 100
 
 
-def default_topics(namespace: str) -> dict[str, str]:
-    """topic -> type recorded by default: the three inputs, the identification outputs and
-    the plottable numbers of the speed and position models, all under ``namespace``."""
-    rel = {**INPUT_TYPES, **OUTPUT_TYPES,
+def default_topics(namespace: str, inputs: Mapping[str, str] | None = None) -> dict[str, str]:
+    """topic -> type recorded by default: the three inputs (or ``inputs``, topic -> type),
+    the identification outputs and the plottable numbers of the speed and position models,
+    all under ``namespace``."""
+    rel = {**({} if inputs is not None else INPUT_TYPES), **OUTPUT_TYPES,
            **{stat_topic(o, q): t for o in STAT_OUTPUTS for q, (t, _, _) in STAT_TOPICS.items()}}
-    return {topic_name(namespace, name): t for name, t in rel.items()}
+    return {**{topic_name(namespace, name): t for name, t in rel.items()}, **(inputs or {})}
 
 
 def known_type(topic: str, namespace: str = DEFAULT_NAMESPACE) -> str | None:
@@ -72,12 +74,16 @@ class RecorderNode(Node):
     def __init__(self, recorder: BagRecorder, *, context: Context | None = None,
                  namespace: str = DEFAULT_NAMESPACE, topics: Sequence[str] | None = None,
                  depth: int = 10000, flush_period_s: float = 0.5,
-                 node_name: str = "pmsm_record") -> None:
+                 node_name: str = "pmsm_record", inputs: Mapping[str, str] | None = None,
+                 ) -> None:
         super().__init__(node_name, context=context, namespace=namespace)
         self.recorder = recorder
         self.depth = depth
         self.counts: Counter[str] = Counter()
-        self.inputs = {topic_name(self.get_namespace(), s) for s in INPUT_TYPES}
+        inputs = None if inputs is None else {self.resolve_topic_name(t): ty
+                                              for t, ty in inputs.items()}
+        self.inputs = ({topic_name(self.get_namespace(), s) for s in INPUT_TYPES}
+                       if inputs is None else set(inputs))
         self._last_stamp: dict[str, int] = {}
         self._period: dict[str, int] = {}
         self.gaps: Counter[str] = Counter()
@@ -85,7 +91,8 @@ class RecorderNode(Node):
         self._subs: list[tuple[str, str, Any]] = []
         self.first_receive_ns: int | None = None
         ns = self.get_namespace()
-        wanted = {self.resolve_topic_name(t): ty for t, ty in default_topics(ns).items()} \
+        wanted = {self.resolve_topic_name(t): ty
+                  for t, ty in default_topics(ns, inputs).items()} \
             if topics is None else {self.resolve_topic_name(t):
                                     known_type(self.resolve_topic_name(t), ns) for t in topics}
         self.pending = {t for t, ty in wanted.items() if ty is None}

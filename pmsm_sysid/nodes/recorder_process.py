@@ -5,6 +5,8 @@ worker process (``forkserver``: never a fork of a process that runs rclpy) and r
 its subscriptions exist (a bag that cannot be created is refused there, one clear error). No
 fit, analysis or publishing callback of the caller can delay it: it only competes for a core.
 
+- Inputs: the three topics under the namespace, or ``inputs`` (topic -> type), e.g. the
+  ``JointState`` topic an identifier takes its samples from.
 - Progress: the messages recorded per input topic are in shared memory
   (:attr:`RecorderProcess.samples_recorded`), so a simulated motor can pace itself to the
   recorder as well as to the identifier.
@@ -23,7 +25,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import signal
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +49,8 @@ def _drain(executor: Any, node: Any, timeout_s: float = 0.1) -> None:
 
 
 def _serve(conn: Any, path: str, namespace: str, domain_id: int | None,
-           topics: Sequence[str] | None, flush_s: float, progress: Any) -> None:
+           topics: Sequence[str] | None, flush_s: float, progress: Any,
+           inputs: dict[str, str] | None = None) -> None:
     """The recorder process: record until told to stop or the caller is gone."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
@@ -69,15 +72,15 @@ def _serve(conn: Any, path: str, namespace: str, domain_id: int | None,
             conn.send(("error", str(exc)))
             return
         node = RecorderNode(bag, context=ctx, namespace=namespace, topics=topics,
-                            flush_period_s=flush_s, node_name=NODE_NAME)
+                            flush_period_s=flush_s, node_name=NODE_NAME, inputs=inputs)
         executor = SingleThreadedExecutor(context=ctx)
         executor.add_node(node)
-        inputs = [input_topic(namespace, s) for s in INPUT_TYPES]
+        followed = input_topics(namespace, inputs)
         conn.send(("ready", None))
-        command = _record(conn, executor, node, inputs, progress)
+        command = _record(conn, executor, node, followed, progress)
         _drain(executor, node)
         bag.close()
-        for i, topic in enumerate(inputs):
+        for i, topic in enumerate(followed):
             progress[i] = node.counts[topic]
         if command is not None:
             conn.send(("done", node.summary()))
@@ -87,6 +90,13 @@ def _serve(conn: Any, path: str, namespace: str, domain_id: int | None,
         from rclpy.utilities import try_shutdown
 
         try_shutdown(context=ctx)
+
+
+def input_topics(namespace: str, inputs: Mapping[str, str] | None) -> list[str]:
+    """The input topics whose progress is followed: ``inputs`` or the three under
+    ``namespace``."""
+    return list(inputs) if inputs is not None else [input_topic(namespace, s)
+                                                    for s in INPUT_TYPES]
 
 
 def _record(conn: Any, executor: Any, node: Any, inputs: list[str], progress: Any) -> Any:
@@ -107,20 +117,22 @@ class RecorderProcess:
 
     def __init__(self, path: str | Path, *, namespace: str, domain_id: int | None,
                  topics: Sequence[str] | None = None, flush_period_s: float = 0.5,
-                 ready_timeout_s: float = 120.0) -> None:
+                 ready_timeout_s: float = 120.0, inputs: Mapping[str, str] | None = None,
+                 ) -> None:
         ctx: Any = multiprocessing.get_context(START_METHOD)
         self.path = Path(path)
         self.node_name = NODE_NAME
         from .recorder import default_topics
 
-        self.topics = set(default_topics(namespace)) if topics is None else set(topics)
-        self.inputs = [input_topic(namespace, s) for s in INPUT_TYPES]
+        inputs = None if inputs is None else dict(inputs)
+        self.topics = set(default_topics(namespace, inputs)) if topics is None else set(topics)
+        self.inputs = input_topics(namespace, inputs)
         self._conn, child = ctx.Pipe()
-        self._progress = ctx.Array("q", len(INPUT_TYPES), lock=False)
+        self._progress = ctx.Array("q", len(self.inputs), lock=False)
         self._proc = ctx.Process(
             target=_serve, name="pmsm-recorder", daemon=False,
             args=(child, str(path), namespace, domain_id, topics, flush_period_s,
-                  self._progress))
+                  self._progress, inputs))
         self._proc.start()
         child.close()
         self.result: dict[str, Any] | None = None
