@@ -20,10 +20,11 @@ export MKL_NUM_THREADS ?= 1
 
 venv: $(STAMP)
 
-$(STAMP): requirements.lock setup.py setup.cfg package.xml
+$(STAMP): requirements.lock setup.py setup.cfg pyproject.toml package.xml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q -r requirements.lock
 	$(PY) -m pip install -q --no-deps --no-build-isolation -e .
+	rm -rf pmsm_sysid.egg-info  # a legacy editable install's metadata, replaced by the line above
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -145,11 +145,12 @@ def test_burst_is_latest_wins_and_bad_models_are_counted(ros_context: Any) -> No
     """Models arriving faster than they are analysed are skipped, the newest is analysed;
     a malformed model is counted as failed and does not stop the worker."""
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
     from std_msgs.msg import String
 
     from pmsm_sysid.nodes.gfrf_node import GfrfNode
 
-    node = GfrfNode(context=ros_context)
+    node = GfrfNode(context=ros_context, parameter_overrides=[Parameter("queue_size", value=1)])
     ex = SingleThreadedExecutor(context=ros_context)
     ex.add_node(node)
     gate = threading.Event()

@@ -76,3 +76,43 @@ def test_base_install_has_no_ros_and_the_ros_extra_has_the_locked_wheels(
     lock = {line.split("==")[0] for line in (REPO / "requirements.lock").read_text().split()}
     ros = [r.split("~=")[0] for r in sections["ros"]]
     assert ros and all(name.startswith("ros-jazzy-") and name in lock for name in ros), ros
+
+
+EXECUTABLES = ("gfrf", "identifier", "pmsm-sysid", "sim")
+
+
+def test_the_venvs_editable_install_puts_the_executables_on_its_path() -> None:
+    """``make venv`` (an editable install, built through pyproject.toml): the console
+    scripts are in the environment's bin/, not in the ROS directory setup.cfg names for
+    colcon."""
+    bin_dir = Path(sys.executable).parent
+    assert all((bin_dir / name).is_file() for name in EXECUTABLES)
+    assert not (Path(sys.prefix) / "lib" / "pmsm_sysid").exists()
+
+
+def test_pip_install_puts_the_executables_in_bin(tmp_path: Path) -> None:
+    """``pip install .`` builds a wheel: the console scripts go to the prefix's bin/ (where a
+    pip user's PATH looks), whatever setup.cfg sets for colcon's lib/pmsm_sysid."""
+    import shutil
+
+    src = tmp_path / "src"  # a copy: a wheel build writes build/ beside setup.py
+    src.mkdir()
+    for name in ("setup.py", "setup.cfg", "pyproject.toml", "package.xml"):
+        shutil.copy2(REPO / name, src / name)
+    for name in ("pmsm_sysid", "resource", "msg_schemas"):
+        shutil.copytree(REPO / name, src / name,
+                        ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
+    pip = [sys.executable, "-m", "pip", "--disable-pip-version-check"]
+    built = subprocess.run([*pip, "wheel", "-q", "--no-deps", "--no-build-isolation",
+                            "-w", str(tmp_path / "dist"), str(src)],
+                           capture_output=True, text=True, timeout=600)
+    assert built.returncode == 0, built.stderr
+    wheel = next((tmp_path / "dist").glob("pmsm_sysid-*.whl"))
+    prefix = tmp_path / "prefix"
+    done = subprocess.run([*pip, "install", "-q", "--no-deps", "--no-index", "--prefix",
+                           str(prefix), str(wheel)], capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in (prefix / "bin").iterdir()) == sorted(EXECUTABLES)
+    assert not (prefix / "lib" / "pmsm_sysid").exists()
+    assert (prefix / "share" / "pmsm_sysid" / "package.xml").is_file()

@@ -3,13 +3,14 @@
 Lives in the pipeline's namespace ``<ns>`` (node ``<ns>/pmsm_gfrf``; topic names relative to
 it). Subscribes to ``<ns>/model`` (std_msgs/String, the identify JSON of one window plus
 ``window``, ``model_id``, ``output``). The subscription callback only hands the raw string to
-a bounded latest-wins queue (``queue_size``, default 1; a model replaced before it was
-analysed is counted as skipped); a worker thread passes it to a worker process of the node's
-own (parameter ``worker: process``, the default; ``thread`` analyses in the thread), which
-parses it and runs :func:`pmsm_sysid.core.frequency.analysis.analyse_json` (H1 peaks, H2/H3
-ridges, poles, support by the excitation): off the executor and off its GIL, at a lower
-scheduling priority than the fits (an analysis may be skipped, a fit should not). A timer
-publishes finished results from the executor thread (layouts in :mod:`.gfrf_msgs`):
+a bounded latest-wins queue (``queue_size``, default 2: the newest speed and position
+models; a model replaced before it was analysed is counted as skipped); a worker thread
+passes it to a worker process of the node's own (parameter ``worker: process``, the
+default; ``thread`` analyses in the thread), which parses it and runs
+:func:`pmsm_sysid.core.frequency.analysis.analyse_json` (H1 peaks, H2/H3 ridges, poles,
+support by the excitation): off the executor and off its GIL, at a lower scheduling
+priority than the fits (an analysis may be skipped, a fit should not). A timer publishes
+finished results from the executor thread (layouts in :mod:`.gfrf_msgs`):
 
 * ``<ns>/ridges`` (std_msgs/String): the gfrf JSON + ``model_id``/``output``/``window``;
 * ``<ns>/ridge_frequencies`` (std_msgs/Float64MultiArray): one row per peak/ridge;
@@ -42,7 +43,7 @@ from .health import HealthPublisher, gfrf_health
 from .numbers import NumberPublisher
 from .params import GFRF_SPECS, check_orders, declare_all
 
-DEFAULTS: dict[str, Any] = {"queue_size": 1, "orders": [1, 2, 3], "publish_period_s": 0.05,
+DEFAULTS: dict[str, Any] = {"queue_size": 2, "orders": [1, 2, 3], "publish_period_s": 0.05,
                             "worker": "process"}
 __all__ = ["DEFAULTS", "GfrfNode", "analyse_message"]
 NICE = 10  # the analyses yield the CPU to the fits and the data path (they may skip models)
