@@ -4,7 +4,8 @@ joint_state_broadcaster publishes), several joints in each message.
 ``replay`` of such a bag publishes on the recorded topic; the identifier with only
 ``input_layout: joint_state`` and ``joint_name`` takes every sample, and its models are the
 offline fits of the same bag; a namespaced robot is one remap away. ``identify`` and
-``diagnose`` read the same bag (``--joint`` names the axis among several joints).
+``diagnose`` (and ``fit-plant``) read the same bag (``--joint`` names the axis among
+several joints).
 """
 
 from __future__ import annotations
@@ -148,3 +149,5 @@ def test_identify_and_diagnose_read_the_robots_bag(tmp_path: Path) -> None:
     assert found["effects"] == []  # the recording's own plant: nothing missing
     same = ps.diagnose("drive", topics, replay=False, gfrf=False).to_dict()
     assert found["mismatch"] == same["mismatch"] and found["fit"] == same["fit"]
+    with pytest.raises(ps.PmsmSysidError, match="no joint 'elbow'"):  # read the same way
+        ps.fit_plant(robot, joint="elbow")

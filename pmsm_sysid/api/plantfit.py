@@ -64,16 +64,17 @@ class PlantFit:
         return out
 
 
-def load(data: RecordingLike, label: str, namespace: str | None) -> Recording:
+def load(data: RecordingLike, label: str, namespace: str | None,
+         joint: str | None = None) -> Recording:
     """A :class:`Recording`, or the recording of a bag path."""
     from .diagnosis import _recording
 
-    return _recording(data, label, namespace)
+    return _recording(data, label, namespace, joint)
 
 
 def fit_plant(recording: RecordingLike, *, validate: RecordingLike | None = None,
               namespace: str | None = None, alpha: float = 1e-3,
-              min_share: float = 0.01) -> PlantFit:
+              min_share: float = 0.01, joint: str | None = None) -> PlantFit:
     """Identify the physical plant of one axis from a recording of it.
 
     Mass and viscous damping are always estimated (instrumental variables built from the
@@ -86,7 +87,8 @@ def fit_plant(recording: RecordingLike, *, validate: RecordingLike | None = None
 
     ``recording`` and ``validate`` (held-out data; default: the last 30 % of
     ``recording``): :class:`Recording` objects or bag paths (any layout ``read_bag``
-    reads, topics or JointState); ``namespace`` picks the topics. ``alpha`` and
+    reads, topics or JointState); ``namespace`` picks the topics, ``joint`` the axis's joint
+    of a JointState recording of several joints. ``alpha`` and
     ``min_share`` as in :func:`diagnose`. The plant's ``sample_rate_hz`` is the
     recording's; it drives ``simulate``, the sim node and ``diagnose --plant``.
 
@@ -108,8 +110,8 @@ def fit_plant(recording: RecordingLike, *, validate: RecordingLike | None = None
 
     opts = FitOptions(alpha=_checks.fraction("alpha", alpha),
                       min_share=_checks.fraction("min_share", min_share))
-    rec = load(recording, "recording", namespace)
-    held = None if validate is None else load(validate, "validate", namespace)
+    rec = load(recording, "recording", namespace, joint)
+    held = None if validate is None else load(validate, "validate", namespace, joint)
     sources: dict[str, str] = {}
     for key, given, r in (("recording", recording, rec), ("validate", validate, held)):
         if r is None:

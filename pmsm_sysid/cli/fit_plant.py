@@ -27,6 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="held-out recording (default: the last 30%% of BAG)")
     p.add_argument("--namespace", type=ros_name, default=None,
                    help="topic namespace or JointState topic (default: auto-detect)")
+    p.add_argument("--joint", metavar="NAME", default=None,
+                   help="JointState recordings of several joints (ros2_control): the axis's "
+                        "joint")
     p.add_argument("--alpha", type=parse_fraction, default=1e-3,
                    help="family-wise false-alarm level of each selection step (default 1e-3)")
     p.add_argument("--min-share", type=parse_fraction, default=0.01,
@@ -52,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
 
     with activity("fit-plant"):
         fit = fit_plant(args.bag, validate=args.validate, namespace=args.namespace,
-                        alpha=args.alpha, min_share=args.min_share)
+                        alpha=args.alpha, min_share=args.min_share, joint=args.joint)
     out = sys.stderr if args.json == "-" else sys.stdout
     print(header(fit.recording, args.bag), file=out)
     print(fit.summary(), file=out)
