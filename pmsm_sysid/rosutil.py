@@ -36,6 +36,9 @@ from .topics import INPUT_TYPES, POSITION, SPEED, THRUST, normalize_namespace
 NS_PER_S = 1_000_000_000
 N = TypeVar("N", bound=Node)
 DATA_DEPTH = 1000
+#: keep-last depth where no sample may be lost to a peer starved of CPU for a while (20 s at
+#: 500 Hz): the sim's and the replay's publishers, the identifier's and the recorder's inputs
+SLACK_DEPTH = 10000
 
 
 def data_qos(depth: int = DATA_DEPTH) -> QoSProfile:

@@ -109,9 +109,10 @@ def test_pip_install_puts_the_executables_in_bin(tmp_path: Path) -> None:
     assert built.returncode == 0, built.stderr
     wheel = next((tmp_path / "dist").glob("pmsm_sysid-*.whl"))
     prefix = tmp_path / "prefix"
-    done = subprocess.run([*pip, "install", "-q", "--no-deps", "--no-index", "--prefix",
-                           str(prefix), str(wheel)], capture_output=True, text=True,
-                          timeout=600)
+    # --ignore-installed: never uninstall this environment's own copy on the way
+    done = subprocess.run([*pip, "install", "-q", "--no-deps", "--no-index", "--ignore-installed",
+                           "--prefix", str(prefix), str(wheel)], capture_output=True,
+                          text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     assert sorted(p.name for p in (prefix / "bin").iterdir()) == sorted(EXECUTABLES)
     assert not (prefix / "lib" / "pmsm_sysid").exists()

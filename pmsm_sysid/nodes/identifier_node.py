@@ -10,7 +10,8 @@ ros2_control's joint_state_broadcaster publishes; ``effort``/``velocity``/``posi
 window ring, fitting thread) around :class:`pmsm_sysid.core.online.tracker.WindowTracker` (fits,
 cross-validation, change detection), which runs in a worker process of its own (parameter
 ``fit_worker: process``, the default; ``thread`` runs it in the engine's fitting thread);
-``__init__`` only wires parameters, subscriptions,
+``__init__`` only wires parameters, subscriptions (keep-last 10000: a starved process
+catches up without a loss; each callback also takes what already waits),
 publishers and one timer that publishes finished results:
 
 * ``<ns>/model`` (std_msgs/String): one identify-JSON per output and window, plus
@@ -46,7 +47,14 @@ from ..core.online.inputs import InputReport, describe_inputs
 from ..core.online.streaming import Window
 from ..core.online.tracker import TrackerConfig, WindowResult, WindowTracker, tracker_config
 from ..core.online.workerproc import ProcessWorker
-from ..rosutil import data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
+from ..rosutil import (
+    SLACK_DEPTH,
+    data_qos,
+    message_class,
+    sample_value,
+    stamp_from_ns,
+    stamp_to_ns,
+)
 from ..topics import (
     CHANGE,
     DEFAULT_NAMESPACE,
@@ -192,13 +200,13 @@ class IdentifierNode(Node):
         if p["input_layout"] == "topics":
             self._types = {sig: message_class(t) for sig, t in INPUT_TYPES.items()}
             self._subs = {sig: self.create_subscription(
-                self._types[sig], sig, self._on_raw(sig), data_qos(),
+                self._types[sig], sig, self._on_raw(sig), data_qos(SLACK_DEPTH),
                 raw=True) for sig in INPUT_TYPES}
         elif p["input_layout"] == "joint_state":
             if not p["joint_name"]:
                 raise DataError("input_layout joint_state needs the joint_name parameter")
-            self.create_subscription(JointState, p["joint_state_topic"], self._on_joint_state,
-                                     data_qos())
+            self._joint_sub = self.create_subscription(
+                JointState, p["joint_state_topic"], self._on_joint_state, data_qos(SLACK_DEPTH))
         else:
             raise DataError(f"input_layout must be 'topics' or 'joint_state', got "
                             f"'{p['input_layout']}'")
@@ -255,6 +263,17 @@ class IdentifierNode(Node):
                 return
 
     def _on_joint_state(self, msg: Any) -> None:
+        """One JointState message, then what already waits (as :meth:`_drain`)."""
+        self._take_joint(msg)
+        sub = self._joint_sub
+        for _ in range(3 * DRAIN_ROUNDS):
+            with sub.handle:
+                got = sub.handle.take_message(sub.msg_type, False)
+            if got is None:
+                return
+            self._take_joint(got[0])
+
+    def _take_joint(self, msg: Any) -> None:
         self._input_seen()
         try:
             i = list(msg.name).index(self.params["joint_name"])

@@ -36,7 +36,7 @@ from rclpy.node import Node
 
 from ..bagio import RawMessage, bag_topics, iter_raw
 from ..core.errors import BagError
-from ..rosutil import data_qos, message_class
+from ..rosutil import SLACK_DEPTH, data_qos, message_class
 from ..topics import INPUT_TYPES
 from .health import HealthPublisher, replay_health
 
@@ -189,7 +189,7 @@ class ReplayerNode(Node):
             self.matched[out] = int(info.current_count)
             self.stats.listeners[out] = max(self.stats.listeners[out], int(info.current_count))
 
-        return self.create_publisher(message_class(msgtype), out, data_qos(),
+        return self.create_publisher(message_class(msgtype), out, data_qos(SLACK_DEPTH),
                                      event_callbacks=PublisherEventCallbacks(matched=on_matched))
 
     # ------------------------------------------------------------------ phases
