@@ -47,23 +47,8 @@ from ..core.online.inputs import InputReport, describe_inputs
 from ..core.online.streaming import Window
 from ..core.online.tracker import TrackerConfig, WindowResult, WindowTracker, tracker_config
 from ..core.online.workerproc import ProcessWorker
-from ..rosutil import (
-    SLACK_DEPTH,
-    data_qos,
-    message_class,
-    sample_value,
-    stamp_from_ns,
-    stamp_to_ns,
-)
-from ..topics import (
-    CHANGE,
-    DEFAULT_NAMESPACE,
-    INPUT_TYPES,
-    JOINT_STATE_TYPE,
-    MODEL,
-    THRUST,
-    VALIDATION,
-)
+from ..rosutil import SLACK_DEPTH, data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
+from ..topics import CHANGE, DEFAULT_NAMESPACE, INPUT_TYPES, JOINT_STATE_TYPE, MODEL, VALIDATION
 from .health import HealthPublisher, IdentifierHealth
 from .numbers import NumberPublisher
 from .params import (
@@ -222,7 +207,7 @@ class IdentifierNode(Node):
     def input_topic_types(self) -> dict[str, str]:
         """topic -> message type of the topics the samples come from (remaps applied)."""
         if self.params["input_layout"] == "joint_state":
-            return {self._input_topics[THRUST]: JOINT_STATE_TYPE}
+            return dict.fromkeys(self._input_topics.values(), JOINT_STATE_TYPE)
         return {self._input_topics[sig]: t for sig, t in INPUT_TYPES.items()}
 
     def _speed_published(self) -> bool:
