@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from itertools import combinations_with_replacement
 from math import comb
 
@@ -28,8 +29,11 @@ from pmsm_sysid.core.terms.regressors import (
 def test_paper_speed_structure_has_2556_candidates() -> None:
     cs = candidate_set(Structure(ny=30, nu=40, degree=2, delay=1, constant=True))
     assert cs.n_candidates == 2556
-    # closed form: 1 + 70 linear + 70*71/2 quadratic
-    assert 1 + 70 + 70 * 71 // 2 == 2556
+    # closed form over the 70 lagged signals: 1 constant + 70 linear + C(71, 2) quadratic,
+    # counted on the terms the set holds, by degree and by lag range
+    assert Counter(t.degree for t in cs.terms) == {0: 1, 1: 70, 2: comb(71, 2)}
+    assert {f for t in cs.terms for f in t.factors} == (
+        {("y", i) for i in range(1, 31)} | {("u", j) for j in range(1, 41)})
     assert len(set(cs.terms)) == 2556
 
 

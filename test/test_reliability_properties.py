@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import warnings
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -229,4 +228,7 @@ def test_property_helpers_see_nan() -> None:
     with pytest.raises(AssertionError):
         _no_nan({"a": [1.0, {"b": float("nan")}]})
     _no_nan({"a": [1.0, None, {"b": 2}]})
-    assert Path(__file__).name.startswith("test_reliability")
+    # infinities too, inside tuples, and the failure names where the value is
+    for bad in (float("inf"), -float("inf")):
+        with pytest.raises(AssertionError, match=r"(?m)^\.a\[1\]\.b\[0\]$"):
+            _no_nan({"a": (1.0, {"b": [bad]})})
