@@ -103,7 +103,8 @@ def test_friction_over_part_of_the_stroke_lives_over_position(loop: str, exc: st
     result = _run(case)
     e = _unexplained(result, "position")
     lo, hi = e.params["region"]
-    assert lo <= 0.015 and hi >= 0.0
+    # the zone (0 to 15 mm of a 47 mm or longer travel) to within 3 mm at each end
+    assert -0.003 <= lo <= 0.003 and 0.012 <= hi <= 0.018, (lo, hi)
     assert e.held_out is not None and e.held_out.significant
     _no_library_high(result)
 
