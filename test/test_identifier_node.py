@@ -104,9 +104,12 @@ def _run(ctx: Any, data: np.ndarray, params: dict[str, Any], joint: list[str] | 
     ex.add_node(src.node)
     per = 3 if signals is None else len(signals)
     try:
-        end = time.monotonic() + 0.5  # let the subscriptions match before publishing
-        while time.monotonic() < end:
-            ex.spin_once(timeout_sec=0.05)
+        # publish nothing before every input and result topic is matched (discovery)
+        results = (topic_name(DEFAULT_NAMESPACE, MODEL), topic_name(DEFAULT_NAMESPACE, VALIDATION))
+        pubs = [*src.pubs.values()] if joint is None else [src.pub]
+        pubs += [p for p in node.publishers if p.topic_name in results]
+        assert len(pubs) == (1 if joint is not None else 3) + 2
+        _spin_until(ex, lambda: all(p.get_subscription_count() > 0 for p in pubs), 30.0)
         for k, row in enumerate(data):
             src.joint(k, row, joint) if joint is not None else src.sample(k, row, signals)
             if k % 50 == 49:
