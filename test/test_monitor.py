@@ -229,6 +229,7 @@ def test_monitor_node_counts_a_live_stream(ros_context: object) -> None:
         pub_node.destroy_node()
 
 
+@pytest.mark.ros
 def test_monitor_cli_once_writes_json(ros_env: int, tmp_path: Path) -> None:
     """With nothing publishing, --once still exits 0 and writes an empty snapshot."""
     out = tmp_path / "snap.json"
@@ -245,6 +246,7 @@ def test_monitor_cli_once_writes_json(ros_env: int, tmp_path: Path) -> None:
     assert "\x1b[" not in proc.stdout  # piped: plain text, no colours or cursor moves
 
 
+@pytest.mark.ros
 def test_monitor_cli_bad_interval_is_one_line(ros_env: int) -> None:
     proc = subprocess.run(
         [sys.executable, "-m", "pmsm_sysid.cli", "monitor", "--interval", "0"],

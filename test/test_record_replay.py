@@ -134,6 +134,7 @@ def test_loop_shifts_stamps_and_paced_replay_keeps_schedule(ros_context: Any,
     assert {m.header.frame_id for m in msgs} == {"pmsm"}
 
 
+@pytest.mark.ros
 def test_header_stamp_patch_equals_reserialisation() -> None:
     from geometry_msgs.msg import WrenchStamped
     from rclpy.serialization import serialize_message
@@ -208,6 +209,7 @@ def test_cli_replay_to_record_and_sigterm_finalises(ros_env: int, tmp_path: Path
     assert recorded == moved
 
 
+@pytest.mark.ros
 def test_cli_errors_are_one_line(ros_env: int, tmp_path: Path) -> None:
     env = _env(ros_env, tmp_path)
     cases = [
@@ -224,6 +226,7 @@ def test_cli_errors_are_one_line(ros_env: int, tmp_path: Path) -> None:
         assert len(lines) == 1 and text in lines[0], (argv, proc.stderr)
 
 
+@pytest.mark.ros
 def test_a_starved_recorder_keeps_every_message_received_before_the_stop(
         ros_context: Any, tmp_path: Path) -> None:
     """The recorder's executor never spins while 3000 samples arrive (a starved process):
@@ -243,7 +246,9 @@ def test_a_starved_recorder_keeps_every_message_received_before_the_stop(
         pub_node = Node("starved_pub", context=ros_context)
         pub = pub_node.create_publisher(message_class(SPEED_TYPE), f"{ns}/speed", data_qos())
         try:
-            while pub.get_subscription_count() < 1:   # discovery, then publish into the queue
+            deadline = time.monotonic() + 30   # discovery, then publish into the queue
+            while pub.get_subscription_count() < 1:
+                assert time.monotonic() < deadline, "the recorder never subscribed"
                 time.sleep(0.01)
             msg = message_class(SPEED_TYPE)()
             for k in range(n_before):

@@ -32,8 +32,8 @@ def test_run_for_five_seconds_prints_the_summary(ros_env: int, tmp_path: Path) -
     s = json.loads(proc.stdout)
     assert set(s) >= KEYS
     assert s["nodes"] == ["sim", "identifier", "gfrf"] and s["clock"] == "wall"
-    # 5 s at 500 Hz, minus what the sim had not yet published when the time was up
-    assert 2000 <= s["samples_published"] <= 2600
+    # --duration counts samples of data (5 s at 500 Hz), whatever the machine's speed
+    assert s["samples_published"] == 2500
     assert s["samples_received"] == s["samples_published"]
     assert s["samples_dropped"] == 0 and s["samples_missing"] == 0
     assert s["windows_fitted"] + s["windows_skipped"] == s["windows_due"] >= 4
