@@ -16,7 +16,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
-.PHONY: venv demo test lint typecheck bags bench docs colcon clean
+.PHONY: venv demo test check browser lint typecheck bags bench docs colcon clean
 
 venv: $(STAMP)
 
@@ -34,8 +34,17 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check pmsm_sysid test bench scripts
 	$(VENV)/bin/mypy pmsm_sysid
 
-test: $(STAMP) lint
+# the whole suite (what CI runs); the browser test's Chromium is installed first
+test: $(STAMP) lint browser
 	ROS_LOG_DIR=$$(mktemp -d) $(PY) -m pytest -n 2 -q test
+
+# the edit-test loop: lint + the tests that need no ROS and are not slow (under a minute)
+check: $(STAMP) lint
+	$(PY) -m pytest -n 2 -q --without-ros -m "not slow" test
+
+# headless Chromium for the report's browser test (Debian package, as root); once
+browser:
+	@bash scripts/install_browser.sh $(VENV)/.browser
 
 bags: $(STAMP)
 	bash scripts/make_bags.sh

@@ -1,11 +1,28 @@
 """Shared fixtures. The ROS fixtures (``ros_env``, ``ros_context``, ``ros_executor``,
 ``sim_motor``: a private domain id, log dir and rclpy Context per test) come from the
 package's own pytest plugin, :mod:`pmsm_sysid.testing.pytest_plugin`, which installing the
-package registers with pytest; a source checkout that is not installed loads it here."""
+package registers with pytest; a source checkout that is not installed loads it here.
+
+``chromium`` (session): headless Chromium as the set-up (``make browser``, part of ``make
+test``) left it -- ``chromium.run(url, profile_dir, *flags)`` starts it offline, with the
+flags it needs on this machine. Where the set-up could not install it (not root, no
+apt-get) the test is skipped with that reason; where it promised a browser and there is
+none, the test fails.
+
+``--without-ros`` (what ``make check`` runs) deselects the tests marked ``ros`` and makes
+rclpy and the ROS message packages unimportable, in the test process and in every Python
+process a test starts, as on a plain ``pip install`` without the ``[ros]`` extra: a test
+that needs ROS and is not marked ``ros`` fails there.
+"""
 
 from __future__ import annotations
 
 import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -14,18 +31,57 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 EMPS_MAT = SHARED / "data" / "emps" / "DATA_EMPS.mat"
 PLUGIN = "pmsm_sysid.testing.pytest_plugin"
+#: What a plain install (no ``[ros]`` extra, no sourced ROS) cannot import.
+ROS_MODULES = ("rclpy", "std_msgs", "geometry_msgs", "sensor_msgs", "diagnostic_msgs",
+               "rosgraph_msgs", "builtin_interfaces", "rcl_interfaces")
+#: What ``make browser`` (scripts/install_browser.sh) promised: "chromium PATH", "none
+#: REASON" or "failed REASON".
+BROWSER_STATE = REPO / ".venv" / ".browser"
+CHROMIUM_NAMES = ("chromium", "chromium-browser")
+_BLOCK = "import sys\nfor _m in {names!r}:\n    sys.modules[_m] = None\n"
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--without-ros", action="store_true",
+                     help="run as without ROS: deselect the 'ros' tests; rclpy and the ROS "
+                          "message packages cannot be imported here or in subprocesses")
 
 
 def pytest_configure(config: pytest.Config) -> None:
     """Load the plugin unless its entry point already did (never register it twice)."""
     import importlib
 
+    if config.getoption("--without-ros"):
+        _block_ros()
     manager = config.pluginmanager
     if manager.is_registered(importlib.import_module(PLUGIN)):
         return
     manager.register(importlib.import_module(PLUGIN), "pmsm_sysid")
+
+
+def _block_ros() -> None:
+    """ROS modules unimportable in this process and (via a ``sitecustomize`` on
+    PYTHONPATH) in every Python process started from it."""
+    for name in ROS_MODULES:
+        sys.modules[name] = None  # type: ignore[assignment]
+    if "PMSM_SYSID_WITHOUT_ROS" in os.environ:
+        return  # an xdist worker: the controller has set PYTHONPATH already
+    site = Path(tempfile.mkdtemp(prefix="pmsm_sysid_without_ros_"))
+    (site / "sitecustomize.py").write_text(_BLOCK.format(names=ROS_MODULES))
+    os.environ["PYTHONPATH"] = os.pathsep.join(
+        [str(site), *filter(None, [os.environ.get("PYTHONPATH")])])
+    os.environ["PMSM_SYSID_WITHOUT_ROS"] = str(site)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if not config.getoption("--without-ros"):
+        return
+    ros = [item for item in items if item.get_closest_marker("ros")]
+    if ros:
+        config.hook.pytest_deselected(items=ros)
+        items[:] = [item for item in items if not item.get_closest_marker("ros")]
 
 
 @pytest.fixture(scope="session")
@@ -33,3 +89,43 @@ def shared_dir() -> Path:
     """../shared beside the repo; a test that needs it fails (not skips) if it is missing."""
     assert SHARED.is_dir(), f"../shared not found at {SHARED}"
     return SHARED
+
+
+@dataclass(frozen=True)
+class Chromium:
+    """A headless Chromium binary and how to start it here (as root, offline)."""
+
+    path: str
+
+    def run(self, url: str, profile: Path, *flags: str,
+            timeout: float = 180.0) -> subprocess.CompletedProcess[str]:
+        """Load ``url`` headless with a fresh profile in ``profile`` and no network (every
+        host name unresolvable, a dead proxy); ``flags`` add e.g. ``--dump-dom`` or
+        ``--screenshot=FILE``."""
+        args = [self.path, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                "--no-first-run", "--disable-background-networking",
+                "--disable-component-update", "--disable-sync", f"--user-data-dir={profile}",
+                "--hide-scrollbars", "--force-device-scale-factor=1",
+                "--virtual-time-budget=10000", "--host-resolver-rules=MAP * ~NOTFOUND",
+                "--proxy-server=127.0.0.1:9", *flags, url]
+        return subprocess.run(args, capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="session")
+def chromium() -> Chromium:
+    """Headless Chromium from the set-up (see the module doc); never installs anything."""
+    found = next((p for p in map(shutil.which, CHROMIUM_NAMES) if p), None)
+    state = BROWSER_STATE.read_text().strip() if BROWSER_STATE.is_file() else ""
+    kind, _, detail = state.partition(" ")
+    if found:
+        return Chromium(found)
+    if kind == "chromium":
+        pytest.fail(f"the set-up installed chromium ({detail}) but it is not on PATH now",
+                    pytrace=False)
+    if kind == "failed":
+        pytest.fail(f"the set-up could not install chromium: {detail}", pytrace=False)
+    if kind == "none":
+        pytest.skip(f"NO BROWSER: {detail} (make browser)")
+    pytest.skip("NO BROWSER: chromium is not installed; `make browser` (part of `make test`) "
+                "installs it")
+

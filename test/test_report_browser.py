@@ -4,15 +4,15 @@ used, and with the network switched off -- every embedded image loads (naturalWi
 equal the PNG's), and in a full-page screenshot each image's box shows that figure (pixel
 correlation with the PNG).
 
-Chromium is installed by the fixture when it is missing and apt-get can run (as root);
-otherwise the test is skipped with the reason.
+Chromium comes from the set-up (``make browser``, part of ``make test``), through the
+``chromium`` fixture of conftest.py: where the set-up could not install it (not root, no
+apt-get) the tests are skipped with that reason; where it promised one, they fail without it.
 """
 
 from __future__ import annotations
 
 import html
 import json
-import os
 import re
 import shutil
 import subprocess
@@ -22,10 +22,9 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest import Chromium
 from test_report import FIGURES, REPO, bundled_bag, check_page, png_size
 
-NAMES = ("chromium", "chromium-browser")
-APT_TIMEOUT_S = 900
 CHECK_JS = """<script>
 window.addEventListener('load', function () {
   var rows = Array.prototype.map.call(document.images, function (i) {
@@ -43,55 +42,12 @@ window.addEventListener('load', function () {
 </script>"""
 
 
-def _which() -> str | None:
-    return next((p for p in map(shutil.which, NAMES) if p), None)
-
-
-def _apt(*args: str) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-    return subprocess.run(["apt-get", "-o", "DPkg::Lock::Timeout=300", *args], env=env,
-                          capture_output=True, text=True, timeout=APT_TIMEOUT_S)
-
-
-@pytest.fixture(scope="session")
-def chromium() -> str:
-    """Path of the chromium binary; installs the Debian package when possible."""
-    found = _which()
-    if found:
-        return found
-    if shutil.which("apt-get") is None:
-        pytest.skip("chromium is not installed and there is no apt-get to install it")
-    if os.geteuid() != 0:
-        pytest.skip("chromium is not installed and installing it needs root (apt-get)")
-    try:
-        r = _apt("install", "-y", "--no-install-recommends", "chromium")
-        if r.returncode != 0:  # empty or stale package lists on a fresh machine
-            _apt("update")
-            r = _apt("install", "-y", "--no-install-recommends", "chromium")
-    except subprocess.TimeoutExpired:
-        pytest.skip(f"installing chromium took more than {APT_TIMEOUT_S} s")
-    found = _which()
-    if not found:
-        tail = (r.stderr or r.stdout).strip().splitlines()[-1:] or ["no output"]
-        pytest.skip(f"could not install chromium with apt-get: {tail[0]}")
-    return found
-
-
-def _run(exe: str, tmp: Path, url: str, *extra: str) -> subprocess.CompletedProcess[str]:
-    args = [exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-            "--no-first-run", "--disable-background-networking", "--disable-component-update",
-            "--disable-sync", f"--user-data-dir={tmp / 'profile'}", "--hide-scrollbars",
-            "--force-device-scale-factor=1", "--virtual-time-budget=10000",
-            "--host-resolver-rules=MAP * ~NOTFOUND", "--proxy-server=127.0.0.1:9", *extra, url]
-    return subprocess.run(args, capture_output=True, text=True, timeout=180)
-
-
-def _image_rows(exe: str, index: Path, tmp: Path) -> dict[str, Any]:
+def _image_rows(chromium: Chromium, index: Path, tmp: Path) -> dict[str, Any]:
     """Load a copy of the page with a checking script; return what it wrote to the DOM."""
     check = index.parent / "_check.html"
     check.write_text(index.read_text(encoding="utf-8").replace("</body>", CHECK_JS + "</body>"),
                      encoding="utf-8")
-    r = _run(exe, tmp, check.as_uri(), "--window-size=1100,900", "--dump-dom")
+    r = chromium.run(check.as_uri(), tmp / "profile", "--window-size=1100,900", "--dump-dom")
     m = re.search(r'<pre id="imgcheck">(.*?)</pre>', r.stdout, re.S)
     assert m, f"the page's check did not run (rc {r.returncode}): {r.stderr[-500:]}"
     check.unlink()
@@ -106,7 +62,8 @@ def _grey(img: Any, size: tuple[int, int] = (160, 120)) -> np.ndarray:
     return g.ravel()
 
 
-def _check_in_browser(chromium: str, out: Path, figures: set[str], tmp_path: Path) -> None:
+def _check_in_browser(chromium: Chromium, out: Path, figures: set[str],
+                      tmp_path: Path) -> None:
     """The page ``out/index.html``, alone in an empty directory, in headless Chromium."""
     from PIL import Image
 
@@ -125,8 +82,8 @@ def _check_in_browser(chromium: str, out: Path, figures: set[str], tmp_path: Pat
 
     shot = tmp_path / "shot.png"
     height = int(rows["height"])
-    _run(chromium, tmp_path, index.as_uri(), f"--window-size=1100,{height}",
-         f"--screenshot={shot}")
+    chromium.run(index.as_uri(), tmp_path / "profile", f"--window-size=1100,{height}",
+                 f"--screenshot={shot}")
     assert shot.is_file(), "chromium wrote no screenshot"
     figs = {}
     for i in images:
@@ -146,8 +103,7 @@ def _check_in_browser(chromium: str, out: Path, figures: set[str], tmp_path: Pat
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(APT_TIMEOUT_S * 2 + 300)
-def test_report_images_load_in_headless_chromium(chromium: str, tmp_path: Path) -> None:
+def test_report_images_load_in_headless_chromium(chromium: Chromium, tmp_path: Path) -> None:
     out = tmp_path / "report"
     r = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "report", str(bundled_bag()),
                         "--out", str(out)], capture_output=True, text=True, timeout=300,
@@ -157,8 +113,8 @@ def test_report_images_load_in_headless_chromium(chromium: str, tmp_path: Path) 
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(APT_TIMEOUT_S * 2 + 300)
-def test_diagnose_report_loads_in_headless_chromium(chromium: str, tmp_path: Path) -> None:
+def test_diagnose_report_loads_in_headless_chromium(chromium: Chromium,
+                                                    tmp_path: Path) -> None:
     """diagnose --report: the common figures and one before/after figure per named effect."""
     out = tmp_path / "report"
     r = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "diagnose", "--plant",
