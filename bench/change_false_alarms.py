@@ -33,7 +33,7 @@ from pmsm_sysid.core.online.livesim import simulated_windows
 from pmsm_sysid.core.online.tracker import WindowResult, WindowTracker, tracker_config
 from pmsm_sysid.core.physics.excitation import EXCITATIONS
 from pmsm_sysid.core.physics.plant import load_plant
-from pmsm_sysid.nodes.identifier_node import DEFAULTS
+from pmsm_sysid.nodes.defaults import IDENTIFIER_DEFAULTS as DEFAULTS
 
 
 def _new_counts() -> dict[str, Any]:

@@ -143,7 +143,7 @@ def engine_overload(minutes: float, factor: float, interval: float) -> dict[str,
     from pmsm_sysid.core.physics.excitation import make_excitation
     from pmsm_sysid.core.physics.motor import simulate
     from pmsm_sysid.core.physics.plant import nominal_plant
-    from pmsm_sysid.nodes.identifier_node import DEFAULTS
+    from pmsm_sysid.nodes.defaults import IDENTIFIER_DEFAULTS as DEFAULTS
 
     fs, seconds = 500.0, 60.0 * minutes
     rec = simulate(nominal_plant(), make_excitation("paper-speed", 30000, fs), seed=1)

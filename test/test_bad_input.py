@@ -263,7 +263,7 @@ def test_identifier_that_no_window_can_fit_is_refused_at_start(
         capsys: pytest.CaptureFixture[str]) -> None:
     from pmsm_sysid.core.errors import DataError
     from pmsm_sysid.core.online.tracker import tracker_config
-    from pmsm_sysid.nodes.identifier_node import DEFAULTS
+    from pmsm_sysid.nodes.defaults import IDENTIFIER_DEFAULTS as DEFAULTS
 
     p = dict(DEFAULTS)
     p["speed.ny"] = 990  # 990 lags + 2 x 16 parameters > 1000 samples

@@ -214,7 +214,7 @@ def test_the_fit_error_has_one_scale_for_the_run() -> None:
     a window whose output swings less (another stretch of an APRBS) with the same error,
     the plant's noise, scores the same."""
     from pmsm_sysid.core.online.tracker import WindowTracker, tracker_config
-    from pmsm_sysid.nodes.identifier_node import DEFAULTS
+    from pmsm_sysid.nodes.defaults import IDENTIFIER_DEFAULTS as DEFAULTS
 
     track = WindowTracker(tracker_config(DEFAULTS))._tracks["speed"]
     wide, narrow = np.array([-2.0, 2.0] * 50), np.array([-1.0, 1.0] * 50)
@@ -302,7 +302,7 @@ def _changes(data: np.ndarray) -> list[int]:
     """Stops of the windows where the speed tracker reports a change (paper defaults)."""
     from pmsm_sysid.core.online.streaming import Window
     from pmsm_sysid.core.online.tracker import WindowTracker, tracker_config
-    from pmsm_sysid.nodes.identifier_node import DEFAULTS
+    from pmsm_sysid.nodes.defaults import IDENTIFIER_DEFAULTS as DEFAULTS
 
     tracker = WindowTracker(tracker_config({**DEFAULTS, "outputs": ["speed"]}))
     h, out = tracker.history, []

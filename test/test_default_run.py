@@ -21,7 +21,7 @@ from pmsm_sysid.core.online.livesim import simulated_windows
 from pmsm_sysid.core.online.tracker import WindowTracker, tracker_config
 from pmsm_sysid.core.physics.plant import Plant, load_plant
 from pmsm_sysid.core.terms.model import NarxModel
-from pmsm_sysid.nodes.identifier_node import DEFAULTS
+from pmsm_sysid.nodes.defaults import IDENTIFIER_DEFAULTS as DEFAULTS
 
 
 def _run_defaults() -> tuple[str, str]:

@@ -15,7 +15,6 @@ import pytest
 from pmsm_sysid.core.physics.excitation import ExcitationSource
 from pmsm_sysid.core.physics.motor import MotorSimulator, simulate
 from pmsm_sysid.core.physics.plant import Cogging, load_plant, nominal_plant
-from pmsm_sysid.nodes.sim_node import plant_from_parameters, plant_parameters
 
 pytestmark = pytest.mark.ros
 REPO = Path(__file__).resolve().parents[1]
@@ -183,6 +182,8 @@ def test_wall_clock_starts_with_the_first_sample_after_a_hold(ros_context: Any) 
 
 
 def test_parameters_round_trip_a_plant_file() -> None:
+    from pmsm_sysid.nodes.sim_node import plant_from_parameters, plant_parameters
+
     plant = load_plant(COGGING)
     flat = plant_parameters(plant)
     assert flat["cogging.enabled"] is True and flat["coulomb_friction.enabled"] is False
