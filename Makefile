@@ -36,11 +36,11 @@ lint: $(STAMP)
 
 # the whole suite (what CI runs); the browser test's Chromium is installed first
 test: $(STAMP) lint browser
-	ROS_LOG_DIR=$$(mktemp -d) $(PY) -m pytest -n 2 -q test
+	ROS_LOG_DIR=$$(mktemp -d) $(PY) -m pytest -n 2 --dist loadgroup -q test
 
 # the edit-test loop: lint + the tests that need no ROS and are not slow (under a minute)
 check: $(STAMP) lint
-	$(PY) -m pytest -n 2 -q --without-ros -m "not slow" test
+	$(PY) -m pytest -n 2 --dist loadgroup -q --without-ros -m "not slow" test
 
 # headless Chromium for the report's browser test (Debian package, as root); once
 browser:

@@ -38,7 +38,20 @@ ROS_MODULES = ("rclpy", "std_msgs", "geometry_msgs", "sensor_msgs", "diagnostic_
 #: REASON" or "failed REASON".
 BROWSER_STATE = REPO / ".venv" / ".browser"
 CHROMIUM_NAMES = ("chromium", "chromium-browser")
-_BLOCK = "import sys\nfor _m in {names!r}:\n    sys.modules[_m] = None\n"
+_BLOCK = '''import sys
+
+
+class _WithoutRos:
+    """Import finder: the ROS modules are not installed (pytest --without-ros)."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in {names!r}:
+            raise ModuleNotFoundError(f"No module named {{name!r}} (--without-ros)", name=name)
+        return None
+
+
+sys.meta_path.insert(0, _WithoutRos())
+'''
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 
@@ -61,27 +74,39 @@ def pytest_configure(config: pytest.Config) -> None:
     manager.register(importlib.import_module(PLUGIN), "pmsm_sysid")
 
 
+def pytest_unconfigure(config: pytest.Config) -> None:
+    site = os.environ.get("PMSM_SYSID_WITHOUT_ROS")
+    if site and "PYTEST_XDIST_WORKER" not in os.environ:  # made by this (controller) process
+        shutil.rmtree(site, ignore_errors=True)
+
+
 def _block_ros() -> None:
     """ROS modules unimportable in this process and (via a ``sitecustomize`` on
     PYTHONPATH) in every Python process started from it."""
-    for name in ROS_MODULES:
-        sys.modules[name] = None  # type: ignore[assignment]
+    loaded = [m for m in sys.modules if m.split(".")[0] in ROS_MODULES]
+    assert not loaded, f"--without-ros: ROS modules already imported: {loaded}"
+    code = _BLOCK.format(names=ROS_MODULES)
+    exec(compile(code, "<without-ros>", "exec"), {"__name__": "pmsm_sysid_without_ros"})
     if "PMSM_SYSID_WITHOUT_ROS" in os.environ:
         return  # an xdist worker: the controller has set PYTHONPATH already
     site = Path(tempfile.mkdtemp(prefix="pmsm_sysid_without_ros_"))
-    (site / "sitecustomize.py").write_text(_BLOCK.format(names=ROS_MODULES))
+    (site / "sitecustomize.py").write_text(code)
     os.environ["PYTHONPATH"] = os.pathsep.join(
         [str(site), *filter(None, [os.environ.get("PYTHONPATH")])])
     os.environ["PMSM_SYSID_WITHOUT_ROS"] = str(site)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    if not config.getoption("--without-ros"):
-        return
-    ros = [item for item in items if item.get_closest_marker("ros")]
-    if ros:
-        config.hook.pytest_deselected(items=ros)
-        items[:] = [item for item in items if not item.get_closest_marker("ros")]
+    """Modules with ``slow`` tests first, each module's tests kept together (module fixtures
+    are made once) and in order, so that the two test processes get the long tests early
+    and finish together; with ``--without-ros``, the ``ros`` tests are deselected."""
+    if config.getoption("--without-ros"):
+        ros = [item for item in items if item.get_closest_marker("ros")]
+        if ros:
+            config.hook.pytest_deselected(items=ros)
+            items[:] = [item for item in items if not item.get_closest_marker("ros")]
+    slow_modules = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in slow_modules)  # stable: order otherwise kept
 
 
 @pytest.fixture(scope="session")

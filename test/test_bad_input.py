@@ -100,8 +100,12 @@ CASES = [(a, o, k, p) for a, o, k in OUTPUTS for p in PLACES
          if not (k == "file" and p == "exists-force-not-ours")]
 
 
-@pytest.mark.parametrize("argv,option,kind,place", CASES,
-                         ids=[f"{a[0]}{o}-{p}" for a, o, _, p in CASES])
+LIVE_VERBS = ("run", "record", "replay", "monitor")  # need ROS: they say so before anything
+
+
+@pytest.mark.parametrize("argv,option,kind,place", [
+    pytest.param(a, o, k, p, id=f"{a[0]}{o}-{p}",
+                 marks=[pytest.mark.ros] if a[0] in LIVE_VERBS else []) for a, o, k, p in CASES])
 def test_every_output_is_checked_before_any_work(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                   argv: list[str], option: str, kind: str,
                                                   place: str) -> None:

@@ -9,6 +9,8 @@ quick on a real change.
 
 from __future__ import annotations
 
+import copy
+import hashlib
 import math
 from dataclasses import replace
 from typing import Any
@@ -22,6 +24,10 @@ from pmsm_sysid.core.online.tracker import WindowTracker, tracker_config
 from pmsm_sysid.core.physics.plant import Plant, load_plant
 from pmsm_sysid.core.terms.model import NarxModel
 from pmsm_sysid.nodes.defaults import IDENTIFIER_DEFAULTS as DEFAULTS
+
+# one test process runs them all (make test: --dist loadgroup), so the shared runs are fitted
+# once
+pytestmark = pytest.mark.xdist_group("default_run")
 
 
 def _run_defaults() -> tuple[str, str]:
@@ -38,15 +44,94 @@ def _run_defaults() -> tuple[str, str]:
 
 def _track(plant: Plant, excitation: str, seconds: float,
            switch: dict[int, Plant] | None = None) -> dict[str, Any]:
-    tracker = WindowTracker(tracker_config(DEFAULTS))
-    out: dict[str, Any] = {"models": [], "validations": [], "changes": [], "errors": []}
+    """What the tracker reports for ``seconds`` of the motor under ``excitation`` (with
+    ``switch``: the plant taking over at a sample). The default motor's stationary runs
+    are shared (:class:`_Stationary`): a run that only needs a prefix of one takes its
+    results; a run with a switch takes the tracker as it was on the last window before the
+    switch, after checking that its windows up to there are the stationary run's, bit for
+    bit, and fits only the windows after."""
     n = round(seconds * plant.sample_rate_hz)
-    for w in simulated_windows(plant, excitation, n, window=tracker.config.window,
-                               hop=tracker.config.hop, history=tracker.history, switch=switch):
-        r = tracker.process(w)
-        for key in out:
-            out[key] += [(w.stop_index, x) for x in getattr(r, key)]
+    cfg = tracker_config(DEFAULTS)
+    switch = switch or {}
+    shared = _Stationary.of(excitation) if plant == load_plant("drive") else None
+    if shared is not None and not switch:
+        return shared.results(n)
+    first = min(switch, default=n)
+    resume = (first // cfg.hop) * cfg.hop  # windows ending here hold no sample of the switch
+    tracker, out = WindowTracker(cfg), _empty()
+    if shared is not None and resume in _Stationary.RESUME_AT:
+        tracker, out = shared.resume(resume)
+    for w in simulated_windows(plant, excitation, n, window=cfg.window, hop=cfg.hop,
+                               history=tracker.history, switch=switch):
+        if shared is not None and w.stop_index <= resume and resume in _Stationary.RESUME_AT:
+            assert shared.digest(w.stop_index) == _digest(w), w.stop_index  # same windows
+            continue
+        _add(out, w, tracker.process(w))
     return out
+
+
+def _empty() -> dict[str, Any]:
+    return {"models": [], "validations": [], "changes": [], "errors": []}
+
+
+def _add(out: dict[str, Any], w: Any, result: Any) -> None:
+    for key in out:
+        out[key] += [(w.stop_index, x) for x in getattr(result, key)]
+
+
+def _digest(w: Any) -> str:
+    return hashlib.sha1(w.values.tobytes() + w.stamps_ns.tobytes()).hexdigest()
+
+
+class _Stationary:
+    """One run of the default motor under one excitation, fitted once per test process
+    and extended as tests need more of it; keeps each window's digest and the tracker as it
+    was at the windows the change tests resume from (``RESUME_AT``)."""
+
+    SECONDS = 60.0
+    RESUME_AT = (10000, 14000)
+
+    @classmethod
+    def of(cls, excitation: str) -> _Stationary:
+        if excitation not in _RUNS:
+            _RUNS[excitation] = cls(excitation)
+        return _RUNS[excitation]
+
+    def __init__(self, excitation: str) -> None:
+        plant = load_plant("drive")
+        self.tracker = WindowTracker(tracker_config(DEFAULTS))
+        self.windows = simulated_windows(
+            plant, excitation, round(self.SECONDS * plant.sample_rate_hz),
+            window=self.tracker.config.window, hop=self.tracker.config.hop,
+            history=self.tracker.history)
+        self.out, self.stop, self.digests = _empty(), 0, {}
+        self.saved: dict[int, tuple[WindowTracker, dict[str, Any]]] = {}
+
+    def _extend(self, n: int) -> None:
+        hop = self.tracker.config.hop
+        while self.stop + hop <= n:
+            w = next(self.windows)
+            _add(self.out, w, self.tracker.process(w))
+            self.stop, self.digests[w.stop_index] = w.stop_index, _digest(w)
+            if w.stop_index in self.RESUME_AT:
+                self.saved[w.stop_index] = copy.deepcopy((self.tracker, self.out))
+
+    def results(self, n: int) -> dict[str, Any]:
+        """The results of the first ``n`` samples (a copy)."""
+        self._extend(n)
+        return {k: [(stop, x) for stop, x in v if stop <= n] for k, v in self.out.items()}
+
+    def digest(self, stop: int) -> str:
+        self._extend(stop)
+        return self.digests[stop]
+
+    def resume(self, stop: int) -> tuple[WindowTracker, dict[str, Any]]:
+        """A copy of the tracker and the results right after the window ending at ``stop``."""
+        self._extend(stop)
+        return copy.deepcopy(self.saved[stop])
+
+
+_RUNS: dict[str, _Stationary] = {}
 
 
 def _true_h1(plant: Plant, f_norm: np.ndarray) -> np.ndarray:

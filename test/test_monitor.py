@@ -246,7 +246,6 @@ def test_monitor_cli_once_writes_json(ros_env: int, tmp_path: Path) -> None:
     assert "\x1b[" not in proc.stdout  # piped: plain text, no colours or cursor moves
 
 
-@pytest.mark.ros
 def test_monitor_cli_bad_interval_is_one_line(ros_env: int) -> None:
     proc = subprocess.run(
         [sys.executable, "-m", "pmsm_sysid.cli", "monitor", "--interval", "0"],

@@ -151,6 +151,7 @@ def test_header_stamp_patch_equals_reserialisation() -> None:
     assert with_header_stamp(data, 7 * NS + 999_999_999) == serialize_message(msg)
 
 
+@pytest.mark.ros
 def test_topics_without_a_python_type_are_skipped() -> None:
     from pmsm_sysid.nodes.replayer import has_header, publishable, remap_topics
 

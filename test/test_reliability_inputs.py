@@ -353,6 +353,7 @@ def test_impossible_identify_options(clean: dict[str, object], argv: list[str],
     cli_error(capsys, ["identify", str(clean["bag"]), *argv], *fragments)
 
 
+@pytest.mark.ros  # run takes a plant file too
 def test_bad_plant_files_one_line_in_every_verb_that_takes_one(
         tmp_path: Path, clean: dict[str, object], capsys: pytest.CaptureFixture[str]) -> None:
     negative = tmp_path / "negative.yaml"

@@ -89,6 +89,7 @@ def test_run_report_draws_the_history(tmp_path: Path) -> None:
     check_page(again / "index.html", RUN_FIGURES | GFRF_FIGURES)
 
 
+@pytest.mark.ros
 def test_run_report_refuses_a_file_as_directory(tmp_path: Path) -> None:
     f = tmp_path / "file"
     f.write_text("x")
