@@ -74,6 +74,7 @@ def test_gfrf_to_dict_is_the_cli_json(tmp_path: Path) -> None:
         assert _drop_timing(again.to_dict()) == _drop_timing(cli)
 
 
+@pytest.mark.slow
 def test_diagnose_to_dict_is_the_cli_json(tmp_path: Path) -> None:
     plant = REPO / "plants" / "nominal.yaml"
     cli = _cli_json(tmp_path, "diagnose", "diagnose", "--plant", str(plant), "--real",
@@ -172,6 +173,7 @@ def test_import_is_light_and_offline_verbs_load_no_ros_and_no_plotting(tmp_path:
     assert proc.returncode == 0, proc.stderr
 
 
+@pytest.mark.slow
 def test_every_public_name_is_documented_with_an_example_that_runs(
         monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(REPO)  # the examples read the bundled bags by relative path

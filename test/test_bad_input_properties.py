@@ -249,6 +249,7 @@ def laced(draw: Any) -> tuple[list[tuple[str, int, int, float]], str]:
     return msgs, what
 
 
+@pytest.mark.slow
 @SETTINGS
 @given(laced())
 def test_nan_laced_reordered_and_huge_recordings(capsys: pytest.CaptureFixture[str],

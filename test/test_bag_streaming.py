@@ -37,6 +37,7 @@ def bags(tmp_path_factory: pytest.TempPathFactory) -> dict[int, Path]:
     return {n: bag_of(root / f"n{n}", u[:n], y[:n]) for n in (12_000, 120_000)}
 
 
+@pytest.mark.slow
 def test_memory_of_a_window_does_not_grow_with_the_recording(bags: dict[int, Path]) -> None:
     ps.identify(bags[12_000], **WINDOW)  # imports and caches outside the measurement
     small = peak_bytes(lambda: ps.identify(bags[12_000], **WINDOW))

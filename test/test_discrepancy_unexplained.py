@@ -109,6 +109,7 @@ def test_friction_over_part_of_the_stroke_lives_over_position(loop: str, exc: st
     _no_library_high(result)
 
 
+@pytest.mark.slow
 def test_nothing_wrong_gives_no_curve() -> None:
     for loop, exc in (("open", "aprbs"), ("closed", "multisine"), ("open", "multisine")):
         result = _run(Case("nominal", Truth(), loop, exc, "high", 1))

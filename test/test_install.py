@@ -40,6 +40,7 @@ def test_live_verb_without_rclpy_is_one_line_naming_the_extra(argv: list[str],
     assert list(tmp_path.iterdir()) == []  # refused before any work
 
 
+@pytest.mark.slow
 def test_offline_verbs_run_without_rclpy(tmp_path: Path) -> None:
     bag = str(REPO / "bags" / "paper_speed_nominal")
     steps = [

@@ -100,6 +100,7 @@ def test_another_project_receives_the_motor_speed(tmp_path: Path, metadata_dir: 
     assert "2 passed" in proc.stdout
 
 
+@pytest.mark.slow
 def test_without_rclpy_the_ros_fixtures_fail_with_one_line(tmp_path: Path,
                                                           metadata_dir: Path) -> None:
     proc = _run_project(tmp_path, metadata_dir, "test_no_ros.py", NO_ROS_TEST)

@@ -154,6 +154,7 @@ def test_duplicated_reordered_and_jittered_stamps_give_the_clean_model(
     assert "150 duplicates" in printed and f"{swapped} messages are stamped earlier" in printed
 
 
+@pytest.mark.slow
 def test_gap_and_rate_change_refused_inside_a_window_fine_outside(
         tmp_path: Path, data: tuple[np.ndarray, np.ndarray],
         capsys: pytest.CaptureFixture[str]) -> None:
@@ -178,6 +179,7 @@ def test_gap_and_rate_change_refused_inside_a_window_fine_outside(
         assert d["sample_rate_hz"] == FS
 
 
+@pytest.mark.slow
 def test_clock_jumps(tmp_path: Path, data: tuple[np.ndarray, np.ndarray],
                      capsys: pytest.CaptureFixture[str]) -> None:
     """Receive times run on; header stamps jump at sample 2500 (forward, back on the grid,
@@ -213,6 +215,7 @@ def test_clock_jumps(tmp_path: Path, data: tuple[np.ndarray, np.ndarray],
 # ------------------------------------------------------------------------------- values
 
 
+@pytest.mark.slow
 def test_absurd_values_refused_saturation_warned(tmp_path: Path,
                                                  data: tuple[np.ndarray, np.ndarray],
                                                  capsys: pytest.CaptureFixture[str]) -> None:
@@ -238,6 +241,7 @@ def test_absurd_values_refused_saturation_warned(tmp_path: Path,
 # ------------------------------------------------------------------------ non-exciting data
 
 
+@pytest.mark.slow
 def test_non_exciting_data_says_why(tmp_path: Path, data: tuple[np.ndarray, np.ndarray],
                                     capsys: pytest.CaptureFixture[str]) -> None:
     u, y = data
@@ -394,6 +398,7 @@ def test_gfrf_of_impossible_models_is_one_line(tmp_path: Path,
               "grid must be")
 
 
+@pytest.mark.slow
 def test_gfrf_of_unstable_linear_and_huge_models_is_finite(tmp_path: Path) -> None:
     """Reported, not refused: an unstable linear part (flagged), no nonlinear terms (H2 = H3
     = 0, said so), coefficients of 1e150 (finite numbers or documented nulls, never NaN)."""

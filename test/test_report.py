@@ -352,6 +352,7 @@ def test_gfrf_json_reports(built: ReportResult, tmp_path: Path) -> None:
     assert "H2 ridges" in (tmp_path / "b" / "index.html").read_text()
 
 
+@pytest.mark.slow
 def test_diagnose_json_tables(tmp_path: Path) -> None:
     d = {"plant": {"mass_kg": 2.3213, "viscous_n_per_mps": 32.4992},
          "mismatch": {"nrmse_before": 0.12, "where": [{"axis": "position", "share": 0.8,
@@ -398,6 +399,7 @@ def test_diagnose_json_figures_repeat_the_diagnosis(tmp_path: Path) -> None:
     assert "gave other results" in r.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["missing", "not_result", "bad_json", "out_is_file",
                                   "empty_bag"])
 def test_bad_input_is_one_line_exit_2(case: str, tmp_path: Path) -> None:
