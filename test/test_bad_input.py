@@ -321,6 +321,15 @@ def test_malformed_json_inputs(tmp_path: Path, capsys: pytest.CaptureFixture[str
     ({"terms": [1, 2]}, ""),
     ({"terms": [{"name": "u(k-1)", "estimate": "x"}]}, ""),
     ({"last_model": [1]}, "not a model JSON"),
+    # JSON true or a quoted number is not a number (true was once read as 1.0)
+    ({"terms": [{"name": "u(k-1)", "estimate": True}], "sample_rate_hz": 500},
+     "term u(k-1): estimate must be a number, got true"),
+    ({"terms": [{"name": "u(k-1)", "estimate": "0.5"}], "sample_rate_hz": 500},
+     'term u(k-1): estimate must be a number, got "0.5"'),
+    ({"terms": [{"name": "u(k-1)", "estimate": 0.5}], "sample_rate_hz": True},
+     "sample_rate_hz must be a number, got true"),
+    ({"terms": [{"name": "u(k-1)", "estimate": 0.5}], "sample_rate_hz": 500,
+      "structure": {"ny": 1, "nu": True, "degree": 1}}, "structure nu must be a whole number"),
 ])
 def test_json_of_the_wrong_kind_for_gfrf(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                          doc: object, fragment: str) -> None:
@@ -353,6 +362,8 @@ def test_import_mat_refuses_complex_missing_and_foreign_files(
         "complex.mat": ({**good, "vir": np.ones(10) + 1j}, "'vir' holds complex numbers"),
         "missing.mat": ({"t": t}, "missing key(s) qm, vir, gtau"),
         "text.mat": ({**good, "qm": np.array(["abc"])}, "'qm' is not numeric"),
+        # once "only 0 samples align": the gain itself is named
+        "inf_gain.mat": ({**good, "gtau": np.inf}, "'gtau' is not finite (inf)"),
     }
     for name, (d, fragment) in cases.items():
         scipy.io.savemat(tmp_path / name, d)

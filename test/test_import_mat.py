@@ -83,6 +83,11 @@ def _case(tmp_path: Path, case: str) -> list[str]:
         return [str(_mat(tmp_path, **{**good, "qm": bad[:, None]})), "--out", out]
     if case == "gtau":
         return [str(_mat(tmp_path, **{**good, "gtau": np.ones((2, 1))})), "--out", out]
+    if case == "gtau_inf":  # once read as "only 0 samples align"
+        return [str(_mat(tmp_path, **{**good, "gtau": np.array([[np.inf]])})), "--out", out]
+    if case == "overflow":
+        return [str(_mat(tmp_path, **{**good, "gtau": np.array([[1e300]]),
+                                     "vir": 1e10 * np.cos(t)[:, None]})), "--out", out]
     if case == "time":
         return [str(_mat(tmp_path, **{**good, "t": t[::-1, None]})), "--out", out]
     assert case == "exists"
@@ -95,6 +100,8 @@ def _case(tmp_path: Path, case: str) -> list[str]:
     ("text", "not a readable MATLAB .mat file"), ("keys", "missing key(s) vir, gtau"),
     ("shape", "'qm' must be a vector of 50 samples"), ("nan", "'qm' has non-finite"),
     ("gtau", "'gtau' must be a scalar"), ("time", "not strictly increasing"),
+    ("gtau_inf", "'gtau' is not finite (inf); it must be a finite gain (thrust = gtau * vir)"),
+    ("overflow", "thrust = gtau * vir overflows"),
     ("exists", "exists already"),
 ])
 def test_bad_mat_one_line_exit_2(tmp_path: Path, case: str, pattern: str,

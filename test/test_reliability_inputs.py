@@ -90,7 +90,11 @@ def test_nonfinite_samples_are_dropped_counted_and_never_fitted_across(
     assert d["alignment"]["n_nonfinite"] == 2 and d["alignment"]["n_aligned"] == 4998
     assert "warning: reading the bag: 4998 samples aligned" in printed
     assert "2 non-finite" in printed
-
+    # diagnose uses the whole recording: one NaN thrust sample is named, not read as a gap
+    # (it once said "not evenly sampled")
+    cli_error(capsys, ["diagnose", "--plant", "plants/nominal.yaml", "--real", str(bag)],
+              f"recording {bag} holds a non-finite thrust sample (nan) at t = 2.4 s, message "
+              "1200 on /pmsm/thrust and 1 more: diagnose uses the whole recording")
 
 
 def test_missing_topic_and_wrong_type_are_one_line(tmp_path: Path,
@@ -198,14 +202,17 @@ def test_clock_jumps(tmp_path: Path, data: tuple[np.ndarray, np.ndarray],
                           "not evenly sampled", "after sample 2499", "step 5e+05 periods")
     _assert_true_model(identify_json(fwd, tmp_path, "--estimate", "1000:2400",
                                      "--validate", "2600:4000")[0])
-    # back by 200 periods: stamps repeat, first received wins, the jump is reported
+    # back by 200 periods on the grid: 200 stamps repeat with other values; two samples
+    # claim one instant, so no time axis holds both: refused, naming the jump
     back = jumped("back", -200 * PERIOD_NS)
-    d, printed = identify_json(back, tmp_path, "--estimate", "500:1500", "--validate",
-                               "1500:2400", capsys=capsys)
-    _assert_true_model(d)
-    # 200 stamps repeat on each stream; 199 of them lie before the newest seen (one equals it)
-    assert d["alignment"]["n_out_of_order"] == 597 and d["alignment"]["n_duplicates"] == 600
-    assert "597 messages are stamped earlier than messages received before them" in printed
+    cli_error(capsys, ["identify", str(back), *SMALL, "--estimate", "500:1500", "--validate",
+                       "1500:2400"], "200 stamps on /pmsm/thrust repeat with other values",
+              "at message 2500 the stamps jump back from t = 4.998 s to 4.6 s",
+              "the time axis is broken")
+    # 0.5 s back (250 stamps), as a clock reset leaves it: diagnose refuses it as well
+    back = jumped("back_half_second", -250 * PERIOD_NS)
+    cli_error(capsys, ["diagnose", "--plant", "plants/nominal.yaml", "--real", str(back)],
+              "250 stamps on /pmsm/thrust repeat with other values", "to 4.5 s")
     # back by 200.3 periods: the two stretches interleave after sorting -> off the grid
     off = jumped("back_off_grid", -200 * PERIOD_NS - 600_000)
     cli_error(capsys, ["identify", str(off), *SMALL, "--estimate", "2000:3000",

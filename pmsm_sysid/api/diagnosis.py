@@ -58,9 +58,12 @@ def _recording(data: RecordingLike, label: str, namespace: str | None,
     if isinstance(data, Recording):
         return data
     if isinstance(data, (str, os.PathLike)):
-        from .recordings import read_bag
+        from ..bagio.read import check_all_finite
+        from .recordings import load_bag
 
-        return read_bag(data, namespace, joint=joint)
+        loaded = load_bag(data, namespace, joint=joint)
+        check_all_finite(loaded, f"recording {data}", "diagnose")
+        return loaded.recording
     raise OptionError(f"{label} must be a Recording or a bag path, got {type(data).__name__}")
 
 

@@ -190,6 +190,32 @@ def _nonfinite(streams: dict[str, _Stream], topics: dict[str, str],
     return tuple(sorted(out, key=lambda x: x[2])[:MAX_NONFINITE_LISTED])
 
 
+def _check_time_axis(path: Path, streams: dict[str, _Stream], topics: dict[str, str]) -> None:
+    """Refuse a stream whose stamps repeat with other values: two samples claim one instant
+    (a clock that jumped back, a stretch recorded twice), so no time axis holds them both. A
+    message re-sent with its value is a duplicate (dropped); one that overtook another is
+    re-sorted; neither repeats a stamp with another value."""
+    for signal, (stamps_a, values_a) in streams.items():
+        stamps = np.frombuffer(stamps_a, dtype=np.int64)
+        if len(stamps) < 2:
+            continue
+        values = np.frombuffer(values_a, dtype=np.float64)
+        order = np.argsort(stamps, kind="stable")
+        s, v = stamps[order], values[order]
+        same = s[1:] == s[:-1]
+        other = (v[1:] != v[:-1]) & ~(np.isnan(v[1:]) & np.isnan(v[:-1]))
+        late = order[1:][same & other]  # the later received copy of each repeated stamp
+        if not len(late):
+            continue
+        i = int(late.min())
+        raise DataError(
+            f"{path}: {len(late)} stamps on {topics.get(signal, signal)} repeat with other "
+            f"values (at message {i} the stamps jump back from t = "
+            f"{int(stamps[:i].max()) / 1e9:.6g} s to {stamps[i] / 1e9:.6g} s): two samples "
+            "claim one instant, so the time axis is broken (a clock reset, or a stretch "
+            "recorded twice); cut the recording at the jump or stamp it again")
+
+
 def read_recording(
     path: str | Path,
     *,
@@ -229,6 +255,7 @@ def read_recording(
     complete = not _enough(streams, until_sample)
     topics = {s: layout.get(s, layout.get("joint_state", s)) for s in SIGNALS}
     nonfinite = _nonfinite(streams, topics)
+    _check_time_axis(path, streams, topics)
     speed = _seconds(streams[tp.SPEED]) if tp.SPEED in streams and streams[tp.SPEED][0] else None
     try:
         rec, report = align_streams(_seconds(streams[tp.THRUST]), speed,
@@ -270,3 +297,15 @@ def check_ranges_finite(loaded: LoadedRecording, ranges: dict[str, tuple[int, in
                 f"{t[hi]:.3f} s) holds a non-finite {signal} sample ({value}) at t = "
                 f"{stamp:.6g} s, message {index} on {topic}{more}; non-finite samples are "
                 "dropped on reading and cannot be fitted: choose a range without it")
+
+
+def check_all_finite(loaded: LoadedRecording, what: str, use: str) -> None:
+    """Refuse a recording used whole (``use``: by what) that held a non-finite sample,
+    naming the first: dropped on reading, it would leave a hole in the sampling grid."""
+    if not loaded.nonfinite:
+        return
+    signal, topic, stamp, index, value = loaded.nonfinite[0]
+    more = f" and {len(loaded.nonfinite) - 1} more" if len(loaded.nonfinite) > 1 else ""
+    raise DataError(f"{what} holds a non-finite {signal} sample ({value}) at t = {stamp:.6g} s, "
+                    f"message {index} on {topic}{more}: {use} uses the whole recording, so "
+                    "every sample must be finite; cut the recording before it or repair it")

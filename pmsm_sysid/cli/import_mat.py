@@ -77,11 +77,19 @@ def load_mat(path: str | Path) -> dict[str, Any]:
             if out[key].size != 1:
                 raise DataError(f"{path}: '{key}' must be a scalar, got shape {out[key].shape}")
             out[key] = float(out[key].reshape(-1)[0])
+            if not np.isfinite(out[key]):
+                raise DataError(f"{path}: '{key}' is not finite ({out[key]:g}); it must be a "
+                                "finite gain" + (" (thrust = gtau * vir)" if key == "gtau"
+                                                 else ""))
     for key in ("t", "qm", "vir", "qg"):
         if key in out and not np.all(np.isfinite(out[key])):
             raise DataError(f"{path}: '{key}' has non-finite samples")
     if not np.all(np.diff(out["t"]) > 0):
         raise DataError(f"{path}: 't' is not strictly increasing")
+    with np.errstate(over="ignore", invalid="ignore"):
+        if not np.all(np.isfinite(out["gtau"] * out["vir"])):
+            raise DataError(f"{path}: thrust = gtau * vir overflows ('gtau' {out['gtau']:g}, "
+                            f"'vir' up to {np.max(np.abs(out['vir'])):g})")
     return out
 
 

@@ -7,6 +7,7 @@ constant. Names follow the paper's tables: ``y(k-1)``, ``u(k-10)``, ``y(k-1)u(k-
 
 from __future__ import annotations
 
+import json
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -21,6 +22,29 @@ FloatArray = NDArray[np.float64]
 Factor = tuple[str, int]
 
 _FACTOR_RE = re.compile(r"([yu])\(k-(\d+)\)(?:\^(\d+))?")
+
+
+def _number(value: Any, what: str, missing_ok: bool = False) -> float:
+    """A JSON number (``true`` or ``"0.5"`` are not; null is NaN where ``missing_ok``)."""
+    if value is None and missing_ok:
+        return float("nan")
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise IdentificationError(f"{what} must be a number, got {_shown(value)}")
+    return float(value)
+
+
+def _shown(value: Any) -> str:
+    """``value`` as JSON writes it (true, "0.5", null), else its repr."""
+    try:
+        return json.dumps(value)
+    except (TypeError, ValueError):
+        return repr(value)
+
+
+def _integer(value: Any, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise IdentificationError(f"{what} must be a whole number, got {_shown(value)}")
+    return value
 
 
 @dataclass(frozen=True, order=True)
@@ -177,18 +201,23 @@ class NarxModel:
         try:
             rows: Sequence[Mapping[str, Any]] = d["terms"]
             terms = tuple(Term.parse(str(r["name"])) for r in rows)
-            est = np.array([float(r["estimate"]) for r in rows], dtype=np.float64)
-            std = np.array([float(r.get("std", np.nan)) for r in rows], dtype=np.float64)
-            err = np.array([float(r.get("err", np.nan)) for r in rows], dtype=np.float64)
+            est = np.array([_number(r["estimate"], f"term {r['name']}: estimate")
+                            for r in rows], dtype=np.float64)
+            std = np.array([_number(r.get("std"), f"term {r['name']}: std", True)
+                            for r in rows], dtype=np.float64)
+            err = np.array([_number(r.get("err"), f"term {r['name']}: err", True)
+                            for r in rows], dtype=np.float64)
             st = d.get("structure")
             structure = (
                 Structure(
-                    ny=int(st["ny"]), nu=int(st["nu"]), degree=int(st["degree"]),
-                    delay=int(st.get("delay", 1)), constant=bool(st.get("constant", True)),
+                    ny=_integer(st["ny"], "structure ny"), nu=_integer(st["nu"], "structure nu"),
+                    degree=_integer(st["degree"], "structure degree"),
+                    delay=_integer(st.get("delay", 1), "structure delay"),
+                    constant=bool(st.get("constant", True)),
                 )
                 if st else None
             )
-            fs = float(d.get("sample_rate_hz", 1.0))
+            fs = _number(d.get("sample_rate_hz", 1.0), "sample_rate_hz")
         except (KeyError, TypeError, ValueError) as exc:
             raise IdentificationError(f"not a model JSON: {exc!r}") from exc
         if not np.all(np.isfinite(est)):
