@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from pmsm_sysid.cli.run_verdict import verdict
 from pmsm_sysid.core.frequency.gfrf import Gfrf
 from pmsm_sysid.core.online.livesim import simulated_windows
 from pmsm_sysid.core.online.tracker import WindowTracker, tracker_config
@@ -43,7 +44,8 @@ def _run_defaults() -> tuple[str, str]:
 
 
 def _track(plant: Plant, excitation: str, seconds: float,
-           switch: dict[int, Plant] | None = None) -> dict[str, Any]:
+           switch: dict[int, Plant] | None = None,
+           params: dict[str, Any] | None = None) -> dict[str, Any]:
     """What the tracker reports for ``seconds`` of the motor under ``excitation`` (with
     ``switch``: the plant taking over at a sample). The default motor's stationary runs
     are shared (:class:`_Stationary`): a run that only needs a prefix of one takes its
@@ -51,9 +53,10 @@ def _track(plant: Plant, excitation: str, seconds: float,
     switch, after checking that its windows up to there are the stationary run's, bit for
     bit, and fits only the windows after."""
     n = round(seconds * plant.sample_rate_hz)
-    cfg = tracker_config(DEFAULTS)
+    cfg = tracker_config({**DEFAULTS, **(params or {})})
     switch = switch or {}
-    shared = _Stationary.of(excitation) if plant == load_plant("drive") else None
+    shared = _Stationary.of(excitation) if plant == load_plant("drive") and not params \
+        else None
     if shared is not None and not switch:
         return shared.results(n)
     first = min(switch, default=n)
@@ -134,6 +137,21 @@ class _Stationary:
 _RUNS: dict[str, _Stationary] = {}
 
 
+def _summary_of(got: dict[str, Any]) -> dict[str, Any]:
+    """The parts of a run summary the verdict reads, from the tracked results."""
+    vals = [v for _, v in got["validations"]]
+    models = {m["output"]: m for _, m in got["models"]}
+    counts: dict[str, list[int]] = {}
+    for v in vals:
+        c = counts.setdefault(v["output"], [0, 0])
+        c[0] += bool(v["pass"])
+        c[1] += 1
+    return {"last_models": models, "last_validations": {v["output"]: v for v in vals},
+            "validation_counts": counts, "change_events": [c for _, c in got["changes"]],
+            "errors": [e for _, e in got["errors"]], "samples_received": 1,
+            "samples_dropped": 0, "samples_missing": 0, "windows_skipped": 0}
+
+
 def _true_h1(plant: Plant, f_norm: np.ndarray) -> np.ndarray:
     """The mass-viscous motor's speed response to thrust held over each sample (ZOH)."""
     a = math.exp(-plant.viscous_n_per_mps / plant.sample_rate_hz / plant.mass_kg)
@@ -170,6 +188,9 @@ def test_the_default_run_is_true_of_the_motor_and_quiet() -> None:
         # the correlation tests reject a correct model in about 5 % of windows
         assert sum(v["pass"] for v in vals) >= 0.9 * len(vals), output
         assert vals[-1]["pass"], vals[-1]  # what the run's summary line reports
+    # the run's verdict: pass, judged by the windows' pass rate (chance failures allowed)
+    v = verdict(_summary_of(got))
+    assert v["status"] == "pass", v
     # the speed models' H1 is the motor's: gain 1/B and corner B/(2 pi M)
     g_true, f_true = _gain_and_corner(lambda f: _true_h1(plant, f))
     speed = [NarxModel.from_dict(m) for _, m in got["models"] if m["output"] == "speed"]
@@ -177,6 +198,26 @@ def test_the_default_run_is_true_of_the_motor_and_quiet() -> None:
     err = est / np.array([g_true, f_true]) - 1.0
     assert np.all(np.abs(np.median(err, axis=0)) < 0.02), np.median(err, axis=0)
     assert np.all(np.abs(err) < 0.1), np.abs(err).max(axis=0)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1200)  # CPU-bound, as above
+def test_a_model_too_small_for_the_plant_fails_the_run_though_its_free_run_holds() -> None:
+    """Position models of 4 terms (the default 15) free-run with R2 > 0.98 on the next
+    window, yet their residuals are not white: every window fails the correlation test ee,
+    far more than the 1 in 20 a correct model fails, and the verdict says FAIL by the
+    binomial test (not by the free run)."""
+    got = _track(load_plant("drive"), "broadband", 10.0,
+                 params={"outputs": ["position"], "position.terms": 4})
+    vals = [v for _, v in got["validations"]]
+    assert len(vals) >= 10 and all(v["free_run"]["r2"] > 0.98 for v in vals)
+    v = verdict(_summary_of(got))
+    assert v["status"] == "FAIL", v
+    n = len(vals)
+    failed = sum(not x["pass"] for x in vals)
+    assert failed >= n - 1 and v["windows"]["position"]["p_value"] < 1e-6
+    assert v["failures"][0].startswith(f"position validation FAIL: {failed} of {n} windows "
+                                       "failed, more than the 1 in 20 a correct model fails")
 
 
 @pytest.mark.slow

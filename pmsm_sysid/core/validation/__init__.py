@@ -7,14 +7,16 @@ from .correlation import (
     CorrelationTests,
     FitMetrics,
     correlation_tests,
+    false_rejection_rate,
     fit_metrics,
     welch_psd,
+    window_false_rejection_rate,
     xcorr,
 )
 from .prediction import FreeRun, free_run, k_step_ahead, one_step_ahead, simulate
 
 __all__ = [
     "CorrelationTest", "CorrelationTests", "FitMetrics", "FreeRun", "correlation_tests",
-    "fit_metrics", "free_run", "k_step_ahead", "one_step_ahead", "simulate", "welch_psd",
-    "xcorr"
+    "false_rejection_rate", "fit_metrics", "free_run", "k_step_ahead", "one_step_ahead",
+    "simulate", "welch_psd", "window_false_rejection_rate", "xcorr"
 ]
