@@ -64,6 +64,13 @@ def test_known_system_json_follows_the_contract(narx_bag: Path, tmp_path: Path,
     printed = capsys.readouterr().out
     assert "Model term" in printed and "Std. dev." in printed and "ERR" in printed
     assert "y(k-1)u(k-2)" in printed and "correlation tests" in printed
+    # each test's line says what its pass rests on: the lags outside the band, how many
+    # white residuals may put there, the largest value and its limit (from the JSON)
+    ee = v["correlation_tests"]["ee"]
+    assert (ee["n_lags"], ee["n_allowed"]) == (20, 4) and ee["max_allowed"] > ee["band"]
+    assert (f"  ee    pass  {ee['n_outside']} of 20 lags outside (4 allowed), largest "
+            f"{ee['max_abs']:.3f} (limit {ee['max_allowed']:.3f})") in printed
+    assert f"95 % band +-{ee['band']:.3f}; pass: no more lags outside" in printed
 
 
 def test_json_to_stdout_keeps_stdout_clean(narx_bag: Path,

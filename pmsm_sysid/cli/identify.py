@@ -108,6 +108,23 @@ def _fmt(x: Any) -> str:
     return "n/a" if x is None else f"{x:.4g}"
 
 
+def correlation_lines(tests: dict[str, Any]) -> list[str]:
+    """The five correlation tests, each with what its pass or FAIL rests on."""
+    band = next(iter(tests.values()))["band"]
+    out = [f"correlation tests of the residuals (95 % band +-{band:.3f}; pass: no more lags "
+           "outside the band than white residuals give 199 times in 200, none beyond the "
+           "limit):"]
+    for k, t in tests.items():
+        line = f"  {k:<5} {'pass' if t['pass'] else 'FAIL':<5}"
+        if "n_allowed" in t:
+            line += (f" {t['n_outside']} of {t['n_lags']} lags outside ({t['n_allowed']} "
+                     f"allowed), largest {t['max_abs']:.3f} (limit {t['max_allowed']:.3f})")
+        else:
+            line += f" largest {t['max_abs']:.3f}"
+        out.append(line)
+    return out
+
+
 def _summary(d: dict[str, Any]) -> str:
     v = d["validation"]
     est, val = v["estimation"], v["validation"]
@@ -120,10 +137,7 @@ def _summary(d: dict[str, Any]) -> str:
                    f"{_fmt(val['osa_r2'])}")
     if v["free_run_diverged"]:
         out.append("warning: the model predicted output diverged (unstable model)")
-    tests = "  ".join(f"{k} {'pass' if t['pass'] else 'FAIL'} ({t['max_abs']:.3f})"
-                      for k, t in v["correlation_tests"].items())
-    band = next(iter(v["correlation_tests"].values()))["band"]
-    out.append(f"correlation tests (band +-{band:.3f}): {tests}")
+    out.extend(correlation_lines(v["correlation_tests"]))
     for w in (d.get("data_check") or {}).get("warnings", []):
         out.append(f"warning: {w}")
     return "\n".join(out)
