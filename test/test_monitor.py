@@ -168,17 +168,64 @@ def test_view_fits_80_columns_plainly() -> None:
     # the latest model as its top terms by ERR: the largest first, the smallest not shown
     assert text.index("y(k-15) -1.54") < text.index("u(k-7) -0.00224")
     assert "u(k-3)^2" not in text and "+2" in text
-    by_test = {" ".join(line.split()[:2]): line for line in lines
-               if line.startswith(("identifier ", "gfrf "))}
-    assert "FAIL" in by_test["identifier speed"]
-    assert "ee 0.942 > 0.0617" in by_test["identifier speed"]
-    assert "pass" in by_test["gfrf position"] and "R² 0.999" in by_test["gfrf position"]
-    assert "free-run R² 0.412 < 0.900" in by_test["identifier position"]
+    by_test = {" ".join(line.split()[:3]): line for line in lines
+               if line.startswith(("speed ", "position "))}
+    assert "FAIL" in by_test["speed next window"]
+    assert "ee 0.942 > 0.0617" in by_test["speed next window"]
+    assert "pass" in by_test["position own window"]
+    assert "R² 0.999" in by_test["position own window"]
+    assert "free-run R² 0.412 < 0.900" in by_test["position next window"]
     assert "2023 Hz" in text  # a rate of thousands without an exponent
     assert "00:" in text and "next-window NRMSE z=56" in text  # event time and reason
     assert "change score speed 2.35 (threshold 7)" in text
     wide = render(_snap(v, topics), 12.3, width=120)
     assert max(len(line) for line in wide.splitlines()) <= 120
+
+
+def test_a_failed_window_of_a_run_that_passes_reads_as_chance() -> None:
+    """The identifier's status carries the run's windows: a window failing a correlation
+    test in a run that fails no more often than a correct model (1 in 20) is 'fail' by
+    chance with the run's count beside it, not a red FAIL; in a run that fails too often it
+    is FAIL with what to try. Rows say which check they are (next window, own window)."""
+    v = SysIdView()
+    corr = json.dumps({"max_abs": 0.116, "band": 0.062, "pass": False, "n_outside": 5,
+                       "n_lags": 20, "n_allowed": 4})
+    values = {"r2": "0.996", "min_r2": "0.9", "diverged": "false", "corr.ee": corr,
+              "windows_passed": "50", "windows_validated": "52", "run_consistent": "true"}
+    v.on_validation([{"name": "identifier/cross_validation/speed", "level": 1,
+                      "message": "window fail", "values": values},
+                     {"name": "gfrf/validation/speed", "level": 1, "message": "warn",
+                      "values": {"corr.ee.max_abs": "0.116", "corr.ee.band": "0.062",
+                                 "corr.ee.pass": "false", "stable": "true"}}])
+    text = render(_snap(v), 1.0, width=200)  # one row a line (at 80 columns they wrap)
+    assert max(len(ln) for ln in render(_snap(v), 1.0, width=80).splitlines()) <= 80
+    lines = {" ".join(ln.split()[:3]): ln for ln in text.splitlines()
+             if ln.startswith("speed ")}
+    assert lines["speed next window"].split()[3:5] == ["fail", "50/52"]
+    assert "ee 0.116 > 0.062, 5/20 lags out (4 ok): by chance" in lines["speed next window"]
+    assert lines["speed own window"].split()[3:5] == ["fail", "50/52"]
+    assert "FAIL" not in text and "a correct model fails 1 in 20" in text
+    values["run_consistent"] = "false"
+    values["windows_passed"] = "40"
+    v.on_validation([{"name": "identifier/cross_validation/speed", "level": 1,
+                      "message": "window fail", "values": values}])
+    line = next(ln for ln in render(_snap(v), 1.0, width=200).splitlines()
+                if ln.startswith("speed") and "next window" in ln)
+    assert line.split()[3:5] == ["FAIL", "40/52"] and "residual not white" in line
+
+
+def test_nothing_received_says_what_to_check(monkeypatch: pytest.MonkeyPatch) -> None:
+    from pmsm_sysid.cli.monitor_view import nothing_received
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", "17")
+    snap = _snap(SysIdView(), [TopicStats("/pmsm/thrust")])
+    hint = nothing_received(snap)
+    assert hint is not None and "nothing received on /pmsm yet" in hint
+    assert "ROS_DOMAIN_ID=17" in hint and "pmsm-sysid run" in hint and "--namespace" in hint
+    assert hint in render(snap, 3.0, width=200)
+    s = TopicStats("/pmsm/thrust")
+    s.feed(1.0, 0, 1.0)
+    assert nothing_received(_snap(SysIdView(), [s])) is None
 
 
 @pytest.mark.ros

@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     from ..rosargs import prepared
     from ..rosutil import check_namespace, ros_session, stop_on_signals
     from .common import write_json
-    from .monitor_view import view
+    from .monitor_view import nothing_received, view
 
     duration = _check(args)
     namespace = check_namespace(args.namespace)
@@ -106,5 +106,8 @@ def run(args: argparse.Namespace) -> int:
                     con.print()
         if args.once and show:
             con.print(view(snap, time.monotonic() - start))
+    hint = nothing_received(snap)
+    if hint and not show:  # the view, when shown, holds the same line
+        print(f"pmsm-sysid monitor: {hint}", file=sys.stderr)
     write_json(snap, args.json)
     return 0

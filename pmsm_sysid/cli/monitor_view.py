@@ -2,14 +2,20 @@
 
 Built for an 80-column terminal (wider ones show the same, with more room): the topics with
 rate, gaps and last value in their units; per identified output the latest model as its
-top terms by ERR; each validation as pass/fail with the one reason that matters and what to
-try; the latest change events with their time. Numbers are shown with 3 significant digits.
+top terms by ERR; each validation row (per output: ``next window``, the identifier's
+cross-validation of the newest model on the next window; ``own window``, the GFRF node's
+check of that model on its estimation window and of its linear part's stability) as
+pass/fail with the one reason that matters and what to try, beside the run's count of windows
+passed (a failed correlation test in a run that passes as often as a correct model is shown
+as chance, ``fail``, not ``FAIL``); the latest change events with their time; a hint when
+nothing arrives at all. Numbers are shown with 3 significant digits.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Mapping
 from datetime import UTC, datetime
 from typing import Any
@@ -147,8 +153,32 @@ def _corr(values: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
     return out
 
 
-def reason(status: Mapping[str, Any]) -> str:
-    """The one reason that matters for a validation result, with what to try."""
+def _run_of(view: Mapping[str, Any], output: str) -> Mapping[str, Any]:
+    """The run's windows so far for ``output``, from the identifier's latest status."""
+    for s in view.get("validation") or []:
+        if str(s.get("name", "")) == f"identifier/cross_validation/{output}":
+            return s.get("values") or {}
+    return {}
+
+
+def _chance(run: Mapping[str, Any]) -> bool:
+    """The run's windows pass as often as a correct model's (the run summary's test)."""
+    return str(run.get("run_consistent", "")).lower() == "true"
+
+
+def _corr_reason(name: str, c: Mapping[str, Any], run: Mapping[str, Any]) -> str:
+    text = f"{name} {num(c.get('max_abs'))} > {num(c.get('band'))}"
+    if c.get("n_outside") is not None and c.get("n_allowed") is not None:
+        text += f", {c['n_outside']}/{c.get('n_lags', '?')} lags out ({c['n_allowed']} ok)"
+    if _chance(run):
+        return text + ": by chance, the run passes"
+    return f"{text}: {CORR_HINT.get(name, 'residual not white')}"
+
+
+def reason(status: Mapping[str, Any], run: Mapping[str, Any] | None = None) -> str:
+    """The one reason that matters for a validation result, with what to try; a failed
+    correlation test of a run whose windows pass as often as a correct model's (``run``:
+    the identifier's run values) is said to be chance."""
     v = status.get("values") or {}
     if str(v.get("diverged", "")).lower() == "true":
         return "free run diverged: the model is unstable on new data"
@@ -159,9 +189,7 @@ def reason(status: Mapping[str, Any]) -> str:
     if fails:
         name = max(fails, key=lambda k: float(fails[k].get("max_abs", 0.0))
                    / max(float(fails[k].get("band", 1.0)), 1e-12))
-        c = fails[name]
-        return (f"{name} {num(c.get('max_abs'))} > {num(c.get('band'))}: "
-                f"{CORR_HINT.get(name, 'residual not white')}")
+        return _corr_reason(name, fails[name], run or {})
     if str(v.get("stable", "")).lower() == "false":
         return "linear part unstable: try fewer lags or more data"
     if status.get("passed"):
@@ -169,19 +197,43 @@ def reason(status: Mapping[str, Any]) -> str:
     return str(status.get("message", ""))
 
 
+#: what each row checks: the identifier's cross-validation of a window's model on the next
+#: window; the GFRF node's check of the same model on its own window (fit, correlation
+#: tests, stability of the linear part); the identifier's input
+CHECKS = {"cross_validation": "next window", "validation": "own window", "input": "input"}
+
+
+def _label(name: str) -> tuple[str, str]:
+    parts = name.split("/")
+    if len(parts) == 3:
+        return parts[2], CHECKS.get(parts[1], parts[1])
+    if len(parts) == 2:
+        return parts[0], CHECKS.get(parts[1], parts[1])
+    return name, ""
+
+
+def _window_text(s: Mapping[str, Any], run: Mapping[str, Any]) -> Text:
+    if s.get("passed"):
+        return Text("pass", style="green")
+    if _chance(run) and "by chance" in reason(s, run):
+        return Text("fail", style="yellow")
+    return Text("FAIL", style="bold red")
+
+
 def validation_table(view: Mapping[str, Any]) -> RenderableType:
     statuses = view.get("validation")
     if statuses is None:
         return Text("validation: none yet")
-    t = _table("validation")
-    t.add_column("test", no_wrap=True)
-    t.add_column("result", no_wrap=True)
+    t = _table("validation (run: windows passed; a correct model fails 1 in 20)")
+    for col in ("output", "check", "window", "run"):
+        t.add_column(col, no_wrap=True)
     t.add_column("reason")
     for s in statuses:
-        name = str(s.get("name", "")).replace("/cross_validation/", " ").replace(
-            "/validation/", " ")
-        verdict = Text("pass", style="green") if s.get("passed") else Text("FAIL", "bold red")
-        t.add_row(name, verdict, reason(s))
+        output, check = _label(str(s.get("name", "")))
+        run = _run_of(view, output)
+        shown = (f"{run['windows_passed']}/{run['windows_validated']}"
+                 if "windows_validated" in run else "")
+        t.add_row(output, check, _window_text(s, run), shown, reason(s, run))
     return t
 
 
@@ -242,9 +294,21 @@ def ridges_line(view: Mapping[str, Any]) -> RenderableType:
     return Text(text)
 
 
+def nothing_received(snap: Mapping[str, Any]) -> str | None:
+    """What to check when no message at all arrived (None once one did)."""
+    if any(s.get("count") for s in snap["topics"]):
+        return None
+    domain = os.environ.get("ROS_DOMAIN_ID", "0")
+    return (f"nothing received on {snap['namespace']} yet: is a pipeline publishing there "
+            f"with ROS_DOMAIN_ID={domain}? (start one: pmsm-sysid run; another namespace: "
+            "--namespace)")
+
+
 def view(snap: Mapping[str, Any], elapsed_s: float) -> Group:
     """The whole screen of one snapshot."""
     sysid = snap["sysid"]
     head = Text(f"pmsm-sysid monitor  {snap['namespace']}  {elapsed_s:.1f} s", style="bold")
-    return Group(head, topics_table(snap), models_table(sysid), ridges_line(sysid),
+    hint = nothing_received(snap)
+    parts: list[RenderableType] = [head] + ([Text(hint, style="yellow")] if hint else [])
+    return Group(*parts, topics_table(snap), models_table(sysid), ridges_line(sysid),
                  validation_table(sysid), changes_block(sysid))

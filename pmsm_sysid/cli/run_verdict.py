@@ -4,13 +4,12 @@ An output is judged by its run, not by its latest window. Each window's model is
 cross-validated (free run on the next window, the five correlation tests of Billings & Voon
 on its estimation residuals, Liu et al. 2005 Eq. 13), and the tests reject a correct model in
 some windows by chance: by their own rule, 4.1 % of the windows for white residuals
-(:func:`~pmsm_sysid.core.validation.window_false_rejection_rate`); over one simulated hour
-of the default run 4.2 % of the position and 5.1 % of the speed windows failed (the speed
-residual keeps a trace of the speed sensor's noise). The run's count of failed windows is
-therefore compared with :data:`NULL_RATE` (1 in 20) by a one-sided binomial test: an output
-fails when P(X >= failed | Binomial(windows, 0.05)) < :data:`LEVEL` (1 %), i.e. when its
-windows fail clearly more often than a correct model's do; the latest window's result is
-then a detail of the line.
+(:func:`~pmsm_sysid.core.validation.window_false_rejection_rate`); the default run's speed
+model measured 5.1 %. The run's count of failed windows is therefore compared with
+:data:`NULL_RATE` (1 in 20) by a one-sided binomial test
+(:mod:`pmsm_sysid.core.validation.windows`): an output fails when P(X >= failed |
+Binomial(windows, 0.05)) < :data:`LEVEL` (1 %), i.e. when its windows fail clearly more
+often than a correct model's do; the latest window's result is then a detail of the line.
 
 Status ``pass``: every identified output's windows pass at a rate consistent with a correct
 model and its latest free run holds, no fit failed, no data-check warning on the latest
@@ -26,24 +25,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
-#: Share of windows whose cross-validation a correct model may fail (see the module doc:
-#: 4.1 % by the tests' own rule, 5.1 % measured for the default run's speed model).
-NULL_RATE = 0.05
-#: One-sided level of the binomial test of the failed windows against NULL_RATE.
-LEVEL = 0.01
+from ..core.validation.windows import LEVEL, NULL_RATE, window_rate
 
-
-def window_rate(passed: int, made: int) -> dict[str, Any]:
-    """The binomial test of a run's windows: ``p_value`` = P(X >= failed) for X ~
-    Binomial(made, NULL_RATE); ``consistent`` with a correct model when it is >= LEVEL;
-    ``judged`` is False when even every window failing could not reach LEVEL (too few)."""
-    from scipy.stats import binom
-
-    failed = made - passed
-    p_value = float(binom.sf(failed - 1, made, NULL_RATE)) if made and failed > 0 else 1.0
-    return {"passed": passed, "windows": made, "failed": failed, "null_rate": NULL_RATE,
-            "level": LEVEL, "p_value": p_value, "consistent": p_value >= LEVEL,
-            "judged": made > 0 and NULL_RATE ** made < LEVEL}
+__all__ = ["LEVEL", "NULL_RATE", "headline", "verdict", "window_rate"]
 
 
 def _failure(v: dict[str, Any]) -> str:

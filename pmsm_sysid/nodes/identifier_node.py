@@ -349,18 +349,18 @@ class IdentifierNode(Node):
             self.numbers.decision(d)
         stamp = stamp_from_ns(round(r.end_stamp * 1e9))
         if r.validations:
-            score = {d["output"]: d for d in r.decisions}  # the change detector, per output
-            arr = DiagnosticArray(status=[self._validation_status(
-                v, score.get(v["output"]), float(self.params["change.s_confirm"]))
-                for v in r.validations])
-            arr.header.stamp = stamp
-            self._val_pub.publish(arr)
             for v in r.validations:
                 self.last["validation"][v["output"]] = v
                 self.numbers.validation(v)
                 count = self.validation_counts.setdefault(v["output"], [0, 0])
                 count[0] += bool(v["pass"])
                 count[1] += 1
+            score = {d["output"]: d for d in r.decisions}  # the change detector, per output
+            arr = DiagnosticArray(status=[self._validation_status(
+                v, score.get(v["output"]), float(self.params["change.s_confirm"]),
+                self.validation_counts.get(v["output"])) for v in r.validations])
+            arr.header.stamp = stamp
+            self._val_pub.publish(arr)
         if r.changes:
             arr = DiagnosticArray(status=[self._change_status(c) for c in r.changes])
             arr.header.stamp = stamp
@@ -374,20 +374,34 @@ class IdentifierNode(Node):
 
     @staticmethod
     def _validation_status(v: dict[str, Any], decision: dict[str, Any] | None = None,
-                           threshold: float | None = None) -> DiagnosticStatus:
+                           threshold: float | None = None,
+                           count: list[int] | None = None) -> DiagnosticStatus:
+        """One window's cross-validation, with the run's windows so far (``count``: passed,
+        made) judged as the run summary judges them (binomial test against 1 in 20)."""
+        from ..core.validation.windows import window_rate
+
         fr = v["free_run"]
         n_est = sum(t["pass"] for t in v["correlation_tests"].values())
         n_new = sum(t["pass"] for t in v["correlation_tests_validation"].values())
-        msg = (f"{'pass' if v['pass'] else 'fail'}: free-run NRMSE {fr['nrmse']:.3g}, "
+        msg = (f"window {'pass' if v['pass'] else 'fail'}: free-run NRMSE {fr['nrmse']:.3g}, "
                f"R2 {fr['r2']:.4g} on the next window; correlation tests {n_est}/5 "
                f"(estimation), {n_new}/5 (next window)")
         values = {"model_id": v["model_id"], "nrmse": fr["nrmse"], "r2": fr["r2"],
                   "diverged": fr["diverged"], "osa_r2": v["osa_r2"], "min_r2": v["min_r2"],
                   "validated_on": v["validated_on"], "pass": v["pass"]}
+        if count:
+            rate = window_rate(*count)
+            values.update(windows_passed=count[0], windows_validated=count[1],
+                          run_p_value=rate["p_value"], run_consistent=rate["consistent"])
+            msg += (f"; run: {count[0]}/{count[1]} windows passed, "
+                    + ("as a correct model does (1 in 20 fail by chance)" if rate["consistent"]
+                       else f"more failures than chance (binomial p = {rate['p_value']:.2g})"))
         for prefix, key in (("corr", "correlation_tests"),
                             ("corr_next", "correlation_tests_validation")):
             for name, t in v[key].items():
-                values[f"{prefix}.{name}"] = {k: t[k] for k in ("max_abs", "band", "pass")}
+                values[f"{prefix}.{name}"] = {k: t[k] for k in ("max_abs", "band", "pass",
+                                                                "n_outside", "n_lags",
+                                                                "n_allowed") if k in t}
         if decision is not None:  # the change statistic of this window and its threshold
             values.update(change_score=decision["score"], change_state=decision["state"],
                           change_threshold=threshold)

@@ -14,9 +14,10 @@ from .correlation import (
     xcorr,
 )
 from .prediction import FreeRun, free_run, k_step_ahead, one_step_ahead, simulate
+from .windows import window_rate
 
 __all__ = [
     "CorrelationTest", "CorrelationTests", "FitMetrics", "FreeRun", "correlation_tests",
     "false_rejection_rate", "fit_metrics", "free_run", "k_step_ahead", "one_step_ahead",
-    "simulate", "welch_psd", "window_false_rejection_rate", "xcorr"
+    "simulate", "welch_psd", "window_false_rejection_rate", "window_rate", "xcorr"
 ]
