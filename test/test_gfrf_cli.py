@@ -184,3 +184,15 @@ def test_pole_on_the_unit_circle(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert d["h1"]["peaks"][0]["kind"] == "dc" and d["h1"]["peaks"][0]["gain_db"] is None
     captured = capsys.readouterr()
     assert "n/a" in captured.out and "Warning" not in captured.err
+
+
+def test_complex_values_carry_their_sign_and_counts_their_plural() -> None:
+    """H at a frequency prints as a + bj or a - bj (it printed '4.25635e-08 1.1799e-07j',
+    no sign); one pole is '1 pole'."""
+    from pmsm_sysid.cli.gfrf import complex_text, plural
+
+    assert complex_text(4.25635e-08, 1.1799e-07) == "4.25635e-08 + 1.1799e-07j"
+    assert complex_text(0.000105325, -0.00409568) == "0.000105325 - 0.00409568j"
+    assert complex_text(None, 1.0) == "n/a 1j"
+    assert (plural(1, "pole"), plural(28, "pole"), plural(0, "pole")) == (
+        "1 pole", "28 poles", "0 poles")

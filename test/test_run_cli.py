@@ -43,6 +43,11 @@ def test_run_for_five_seconds_prints_the_summary(ros_env: int, tmp_path: Path) -
     assert s["last_ridges"]["output"] == "speed"
     assert {"h1", "h2", "poles", "stable"} <= set(s["last_ridges"])
     assert "pmsm-sysid run:" in proc.stderr
+    # --duration stops the motor through its max_samples parameter: not a change to report
+    # (it was logged as "parameters changed: ['max_samples']" though the user changed nothing)
+    assert "parameters changed" not in proc.stderr
+    assert s["verdict"]["status"] in ("pass", "warning", "FAIL")
+    assert set(s["verdict"]["windows"]) <= {"speed", "position"}
 
 
 @pytest.mark.slow

@@ -104,3 +104,42 @@ def test_summary_without_model_still_reports(tmp_path: Path) -> None:
     res = report_summary({"nodes": ["sim"], "last_model": None, "history": None},
                          tmp_path / "rep")
     assert res.figures == () and "no window-by-window history" in res.index.read_text()
+
+
+def _text(page: str) -> str:
+    """The page's words, tags and markup stripped."""
+    import html
+    import re
+
+    page = re.sub(r"<(style|script)[^>]*>.*?</\1>", " ", page, flags=re.S)
+    return " ".join(html.unescape(re.sub(r"<[^>]+>", " ", page)).split())
+
+
+def test_the_run_page_reads_right_for_a_wall_clock_run(tmp_path: Path) -> None:
+    """A wall-clock run's last model: its window by its clock time (its sample indices count
+    from 1970 and mean nothing), a heading that says which model it is, the run's verdict
+    and its windows judged together, '1 pole' for a first-order model."""
+    import pmsm_sysid as ps
+
+    fit = ps.identify("bags/paper_speed_nominal", ny=1, nu=2, degree=1, terms=2,
+                      estimate=(1000, 2000), validate=None)
+    model = fit.to_dict()
+    model.pop("source", None)
+    start = 1_795_665_361.0  # epoch stamps, as the wall clock gives them
+    model["estimate"] = [897_832_680_500, 897_832_681_500]
+    model["window"] = {"seq": 13, "start_stamp": start, "end_stamp": start + 1.998,
+                       "start_index": 897_832_680_500, "stop_index": 897_832_681_500,
+                       "n_samples": 1000}
+    summary = {"nodes": ["sim", "identifier"], "clock": "wall", "last_model": model,
+               "history": None, "validation_counts": {"speed": [50, 52]},
+               "verdict": {"status": "pass", "failures": [], "warnings": [],
+                           "outputs": ["speed validation pass"]}}
+    page = _text(report_summary(summary, tmp_path / "rep").index.read_text(encoding="utf-8"))
+    assert "897832680500" not in page
+    assert "window 13, 1000 samples, 03:56:01.0 to 03:56:03.0 UTC" in page
+    assert "from the identify JSON" not in page
+    assert "The last speed model (window 13): its fit and correlation tests" in page
+    assert "verdict pass" in page
+    assert ("speed windows 50/52 passed their cross-validation, 2 failed: consistent with a "
+            "correct model, which fails 1 in 20 by chance; binomial p = 0.74") in page
+    assert "stable, 1 pole, largest radius" in page and "1 poles" not in page

@@ -85,11 +85,24 @@ def _num(x: float | None, width: int, fmt: str = ".2f") -> str:
     return f"{'n/a':>{width}}" if x is None else f"{x:{width}{fmt}}"
 
 
+def plural(n: int, noun: str) -> str:
+    """``1 pole``, ``28 poles``."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
+def complex_text(re: float | None, im: float | None) -> str:
+    """``4.25635e-08 + 1.1799e-07j``, with the sign of the imaginary part."""
+    if im is None or re is None:
+        return f"{_num(re, 0, '.6g')} {_num(im, 0, '.6g')}j"
+    return f"{re:.6g} {'-' if im < 0 else '+'} {abs(im):.6g}j"
+
+
 def _print(res: dict[str, Any], out: TextIO) -> None:
     fs = res["sample_rate_hz"]
     radius = res["max_pole_radius"]
     print(f"linear part: {'stable' if res['stable'] else 'UNSTABLE'}, "
-          f"{len(res['poles'])} poles, largest radius {radius:.4f} ({fs:g} Hz sampling)", file=out)
+          f"{plural(len(res['poles']), 'pole')}, largest radius {radius:.4f} ({fs:g} Hz "
+          "sampling)", file=out)
     for w in res["warnings"]:
         print(f"warning: {w}", file=out)
     print(f"identifiability: {res['identifiability']['rests_on']}", file=out)
@@ -120,8 +133,8 @@ def _print(res: dict[str, Any], out: TextIO) -> None:
             print(f"  note: {block['note']}", file=out)
     for e in res["eval"]:
         args = ", ".join(f"{f:g}" for f in e["f"])
-        re, im = (_num(x, 0, ".6g") for x in e["h"])
-        print(f"H{e['order']}({args}) = {re} {im}j  ({_num(e['gain_db'], 0, '.3f')} dB, "
+        print(f"H{e['order']}({args}) = {complex_text(*e['h'])}  "
+              f"({_num(e['gain_db'], 0, '.3f')} dB, "
               f"{_num(e['phase_deg'], 0)} deg)", file=out)
 
 

@@ -309,9 +309,12 @@ class MotorSimNode(Node):
             self._pace_start = (time.monotonic(), self.published)
             self.destroy_timer(self._timer)
             self._timer = self.create_timer(self._timer_period(), self._on_timer)
-        self.get_logger().info(  # type: ignore[no-untyped-call]
-            f"parameters changed: {sorted(changes)}; "
-            f"effects on: {', '.join(plant.effects) or 'none'}")
+        # max_samples alone is how `run --duration` stops the motor: not the user's change
+        said = {k: v for k, v in changes.items() if k != "max_samples"}
+        if said:
+            self.get_logger().info(  # type: ignore[no-untyped-call]
+                f"parameters changed: {', '.join(f'{k}={said[k]}' for k in sorted(said))}; "
+                f"effects on: {', '.join(plant.effects) or 'none'}")
 
 
 def check_run_values(values: Mapping[str, Any]) -> None:

@@ -115,7 +115,8 @@ def report_bag(bag: str | Path, out_dir: str | Path,
 
 
 def _identify(d: dict[str, Any], rec: Any, sink: Sink, files: tuple[Path, ...],
-              what: str, why: str = "", before: tuple[Section, ...] = ()) -> ReportResult:
+              what: str, why: str = "", before: tuple[Section, ...] = (),
+              title: str = "Validation: fit and correlation tests") -> ReportResult:
     from ..core.frequency.analysis import analyse_json
     from ..core.terms.model import NarxModel
     from . import frequency, identify
@@ -126,7 +127,7 @@ def _identify(d: dict[str, Any], rec: Any, sink: Sink, files: tuple[Path, ...],
         sections = [signals, identify.model_section(d), validation]
     else:
         sections = [*before, identify.model_section(d),
-                    *identify.json_only_sections(d, why or "no recording")]
+                    *identify.json_only_sections(d, why or "no recording", title)]
     try:
         g = analyse_json(d).to_dict()
     except PmsmSysidError as exc:
@@ -198,8 +199,11 @@ def report_run(d: Mapping[str, Any], json_path: Path, out_dir: str | Path) -> Re
         before = tuple(run.sections(d, sink))
         model = dict(d["last_model"])
         model.pop("source", None)
+        seq = (model.get("window") or {}).get("seq")
         return _identify(model, None, sink, (), json_path.name,
-                         "a live run keeps no recording in its summary", before)
+                         "a live run keeps no recording in its summary", before,
+                         f"The last {model.get('output', '')} model (window {seq}): its fit and "
+                         "correlation tests; the run's windows are judged in Live run above")
     finally:
         sink.close()
 

@@ -87,7 +87,8 @@ def _excited(model_json: Mapping[str, Any] | None) -> list[tuple[float, float]] 
 
 def gfrf_facts(g: Mapping[str, Any]) -> Facts:
     return Facts((
-        ("linear part", f"{'stable' if g['stable'] else 'UNSTABLE'}, {len(g['poles'])} poles, "
+        ("linear part", f"{'stable' if g['stable'] else 'UNSTABLE'}, "
+                        f"{len(g['poles'])} pole{'' if len(g['poles']) == 1 else 's'}, "
                         f"largest radius {float(g.get('max_pole_radius', 0.0)):.4f}"),
         ("identifiability", str((g.get("identifiability") or {}).get("rests_on", "n/a"))),
     ))

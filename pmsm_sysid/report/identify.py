@@ -79,6 +79,27 @@ def term_table(d: Mapping[str, Any]) -> Table:
                  ("Model term", "Estimate", "Std. dev.", "ERR"), rows)
 
 
+def _stamp(t: float) -> str:
+    """A window stamp: UTC clock time for wall-clock stamps, seconds for a simulated clock."""
+    if t > 1e9:
+        from datetime import UTC, datetime
+
+        return datetime.fromtimestamp(round(t, 1), UTC).strftime("%H:%M:%S.%f")[:-5]
+    return f"{t:.2f} s"
+
+
+def _live_window(w: Mapping[str, Any]) -> str:
+    """A live model's window by its stamps (its sample indices count from the clock's
+    origin, e.g. 1970 for wall-clock stamps, and mean nothing to a reader)."""
+    n = w.get("n_samples")
+    where = f"window {w.get('seq', '?')}, {n} samples" if n else f"window {w.get('seq', '?')}"
+    a, b = w.get("start_stamp"), w.get("end_stamp")
+    if a is None or b is None:
+        return where
+    utc = " UTC" if float(a) > 1e9 else ""
+    return f"{where}, {_stamp(float(a))} to {_stamp(float(b))}{utc}"
+
+
 def fit_table(d: Mapping[str, Any]) -> Table:
     v = d.get("validation") or {}
     rows = []
@@ -87,6 +108,8 @@ def fit_table(d: Mapping[str, Any]) -> Table:
         rng = d.get("estimate" if name == "estimation" else "validate")
         if m:
             where = f"{rng[0]}:{rng[1]}" if rng else ""
+            if name == "estimation" and isinstance(d.get("window"), Mapping):
+                where = _live_window(d["window"])
             rows.append((name, where, _num(m.get("nmse")), _num(m.get("r2")),
                          _num(m.get("osa_r2"))))
     return Table("Fit on each window (model predicted output, Eq. 12 of Liu et al. 2005; "
@@ -95,11 +118,16 @@ def fit_table(d: Mapping[str, Any]) -> Table:
 
 
 def correlation_table(tests: Mapping[str, Mapping[str, Any]]) -> Table:
-    rows = tuple((name, _num(t.get("max_abs")), _num(t.get("band")),
+    rows = tuple((name, _num(t.get("max_abs")), _num(t.get("max_allowed")),
+                  _num(t.get("band")),
                   f"{t.get('n_outside', 'n/a')}/{t.get('n_lags', 'n/a')}",
+                  str(t.get("n_allowed", "n/a")),
                   "pass" if t.get("pass") else "FAIL") for name, t in tests.items())
-    return Table("Correlation tests (Eq. 13 of Liu et al. 2005)",
-                 ("test", "max |φ|", "95% band", "lags outside", "verdict"), rows)
+    return Table("Correlation tests (Eq. 13 of Liu et al. 2005): a test passes when no more "
+                 "of its lags fall outside the 95 % band than white residuals put there 199 "
+                 "times in 200, and none beyond the limit",
+                 ("test", "max |φ|", "limit", "95% band", "lags outside", "allowed",
+                  "verdict"), rows)
 
 
 def model_facts(d: Mapping[str, Any]) -> Facts:
@@ -154,13 +182,14 @@ def series_sections(d: Mapping[str, Any], model: NarxModel, rec: Recording,
             Section("Validation (Figs. 4-6, 9-11 of Liu et al. 2005)", tuple(val_blocks))]
 
 
-def json_only_sections(d: Mapping[str, Any], why: str) -> list[Section]:
+def json_only_sections(d: Mapping[str, Any], why: str,
+                       title: str = "Validation: fit and correlation tests") -> list[Section]:
     """What the identify JSON alone supports: the fit and test tables, and why no series."""
     blocks: list[Block] = [Note(f"time-domain figures not drawn: {why}"), fit_table(d)]
     tests = ((d.get("validation") or {}).get("correlation_tests")) or {}
     if tests:
         blocks.append(correlation_table(tests))
-    return [Section("Validation (from the identify JSON)", tuple(blocks))]
+    return [Section(title, tuple(blocks))]
 
 
 def model_section(d: Mapping[str, Any]) -> Section:

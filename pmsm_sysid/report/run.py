@@ -28,7 +28,29 @@ def facts(d: Mapping[str, Any]) -> Facts:
         ("fit latency", f"median {_n(d.get('fit_latency_p50_ms'))} ms, 99th percentile "
                         f"{_n(d.get('fit_latency_p99_ms'))} ms"),
         ("change events", str(len(d.get("change_events") or []))),
+        *verdict_facts(d),
     ))
+
+
+def verdict_facts(d: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """The run's verdict and, per output, its windows judged together: as many failures
+    as a correct model has (1 in 20 by chance), or more (binomial test at 1 %)."""
+    from ..core.validation.windows import window_rate
+
+    out: list[tuple[str, str]] = []
+    v = d.get("verdict") or {}
+    if v.get("status"):
+        named = [*v.get("failures", []), *v.get("warnings", [])]
+        out.append(("verdict", v["status"] + (f": {'; '.join(named)}" if named else "")))
+    for output, count in (d.get("validation_counts") or {}).items():
+        r = window_rate(*count)
+        judged = ("consistent with a correct model, which fails 1 in 20 by chance"
+                  if r["consistent"] else "more than chance explains (a correct model fails "
+                  "1 in 20)")
+        out.append((f"{output} windows", f"{r['passed']}/{r['windows']} passed their "
+                    f"cross-validation, {r['failed']} failed: {judged}; binomial p = "
+                    f"{r['p_value']:.2g}"))
+    return out
 
 
 def events_table(hist: Mapping[str, Any]) -> Table:
