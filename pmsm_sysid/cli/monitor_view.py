@@ -309,6 +309,8 @@ def view(snap: Mapping[str, Any], elapsed_s: float) -> Group:
     sysid = snap["sysid"]
     head = Text(f"pmsm-sysid monitor  {snap['namespace']}  {elapsed_s:.1f} s", style="bold")
     hint = nothing_received(snap)
-    parts: list[RenderableType] = [head] + ([Text(hint, style="yellow")] if hint else [])
+    parts: list[RenderableType] = [head]
+    if hint:
+        parts.append(Text(hint, style="yellow"))
     return Group(*parts, topics_table(snap), models_table(sysid), ridges_line(sysid),
                  validation_table(sysid), changes_block(sysid))
