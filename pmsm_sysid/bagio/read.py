@@ -190,6 +190,25 @@ def _nonfinite(streams: dict[str, _Stream], topics: dict[str, str],
     return tuple(sorted(out, key=lambda x: x[2])[:MAX_NONFINITE_LISTED])
 
 
+def _common_horizon(streams: dict[str, _Stream]) -> dict[str, _Stream]:
+    """A partial read cut by message count: keep what every stream reached (stamps up to
+    the earliest of the streams' newest), so the messages one stream read past another's cut
+    are not counted as unaligned (they were merely not read on the other topics)."""
+    reached = [np.frombuffer(st, dtype=np.int64).max() for st, _ in streams.values() if st]
+    if not reached:
+        return streams
+    horizon = min(reached)
+    out: dict[str, _Stream] = {}
+    for signal, (stamps_a, values_a) in streams.items():
+        stamps = np.frombuffer(stamps_a, dtype=np.int64)
+        keep = stamps <= horizon
+        kept = _stream()
+        kept[0].frombytes(stamps[keep].tobytes())
+        kept[1].frombytes(np.frombuffer(values_a, dtype=np.float64)[keep].tobytes())
+        out[signal] = kept
+    return out
+
+
 def _check_time_axis(path: Path, streams: dict[str, _Stream], topics: dict[str, str]) -> None:
     """Refuse a stream whose stamps repeat with other values: two samples claim one instant
     (a clock that jumped back, a stretch recorded twice), so no time axis holds them both. A
@@ -253,6 +272,8 @@ def read_recording(
                 raise BagError(f"{path}: no messages on {' and '.join(empty)} (empty recording)")
         custom = getattr(reader.storage.metadata, "custom", None) or {}
     complete = not _enough(streams, until_sample)
+    if not complete:
+        streams = _common_horizon(streams)
     topics = {s: layout.get(s, layout.get("joint_state", s)) for s in SIGNALS}
     nonfinite = _nonfinite(streams, topics)
     _check_time_axis(path, streams, topics)
