@@ -350,6 +350,10 @@ def test_gfrf_json_reports(built: ReportResult, tmp_path: Path) -> None:
     assert r.returncode == 0, r.stderr
     check_page(tmp_path / "b" / "index.html", set())
     assert "H2 ridges" in (tmp_path / "b" / "index.html").read_text()
+    # no figure: the terminal says why (it was said only inside the page)
+    assert ("note: no GFRF figures: this gfrf JSON has no 'grid' (write it with 'pmsm-sysid "
+            "gfrf MODEL --grid 256 --json FILE'") in r.stdout
+    assert "0 figures; report:" in r.stdout
 
 
 @pytest.mark.slow

@@ -148,10 +148,11 @@ def json_sections(g: Mapping[str, Any], sink: Sink) -> list[Section]:
                                                    g["h2"]["ridges"])))
         blocks.append(sink.figure(plots.h3_slice(f, _grid_arrays(grid, "h3_slice_db"), fs,
                                                  g["h3"]["ridges"])))
-    else:
-        blocks.append(Note("no GFRF figures: this gfrf JSON has no 'grid' (write it with "
-                           "'pmsm-sysid gfrf MODEL --grid 256 --json FILE', or report the "
-                           "identify JSON instead)"))
+    else:  # said on the page and, through the notes, on the terminal
+        sink.notes.append("no GFRF figures: this gfrf JSON has no 'grid' (write it with "
+                          "'pmsm-sysid gfrf MODEL --grid 256 --json FILE', or report the "
+                          "identify JSON instead)")
+        blocks.append(Note(sink.notes[-1]))
     return [Section("Frequency domain: GFRFs (Figs. 12-17 of Liu et al. 2005)",
                     tuple(blocks + tables(g)))]
 
