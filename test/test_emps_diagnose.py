@@ -26,9 +26,13 @@ def test_emps_names_coulomb_friction_and_offset(shared_dir: Path, tmp_path: Path
     assert EMPS_MAT.is_file(), f"{EMPS_MAT} missing"
     bag = tmp_path / "emps"
     assert main(["import-mat", str(EMPS_MAT), "--out", str(bag)]) == 0
+    # identify reads only as far as its windows need: that is not a truncated bag
+    assert main(["identify", str(bag), "--terms", "4", "--ny", "2", "--nu", "2"]) == 0
+    assert "warning: reading the bag" not in capsys.readouterr().out
     out = tmp_path / "emps.json"
+    rep = tmp_path / "rep"
     assert main(["diagnose", "--plant", str(REPO / "plants" / "emps.yaml"), "--real",
-                 str(bag), "--json", str(out)]) == 0
+                 str(bag), "--json", str(out), "--report", str(rep)]) == 0
     summary = capsys.readouterr().out
     d = json.loads(out.read_text())
     named = {e["name"]: e for e in d["effects"] if e["name"] != "unexplained"}
@@ -52,3 +56,22 @@ def test_emps_names_coulomb_friction_and_offset(shared_dir: Path, tmp_path: Path
     corrected = d["corrected_plant"]
     assert corrected["coulomb_friction"]["amplitude_n"] == pytest.approx(FC_REF, rel=0.05)
     assert corrected["mass_kg"] == pytest.approx(95.1089)
+    # the page says what a control engineer reads right: the corrected plant with the
+    # effects found (it once showed the nominal plant again), the unexplained force in words
+    # and mm (it once dumped 30 curve numbers), no inf, shares that add to at most 100 %
+    import html
+    import re
+
+    page = (rep / "index.html").read_text(encoding="utf-8")
+    text = " ".join(html.unescape(re.sub(r"<[^>]+>", " ", re.sub(
+        r"<style.*?</style>", " ", page, flags=re.S))).split())
+    corrected_part = text[text.index("Corrected plant the nominal plant with"):]
+    assert "coulomb_friction.amplitude_n 20.5" in corrected_part
+    assert "force_offset.amplitude_n -3.1" in corrected_part
+    assert " inf " not in text and "force_n" not in text
+    if any(e["name"] == "unexplained" for e in d["effects"]):
+        assert "mm" in summary.split("unexplained:")[1].splitlines()[0]
+        assert "effect_unexplained" in page  # its curve drawn from the JSON
+    where = d["mismatch"]["where"]
+    assert sum(w["added_share"] for w in where if "added_share" in w) <= 1.0 + 1e-9
+    assert "mismatch lives over: velocity 9" in summary

@@ -5,8 +5,9 @@ Locates the mismatch between the plant and the recording (equation error of inve
 dynamics: over time, position, velocity, frequency), names the missing effects from a
 library of interpretable physics (forward regression by ERR, prewhitened F-tests with a
 Bonferroni correction, held-out confirmation), estimates their parameters with standard
-errors, writes the corrected plant and shows the fit before/after on estimation and held-out
-data. Held-out data: ``--validate BAG2``, else the last 30 % of the recording. ``--json``
+errors, builds the corrected plant (in the JSON as ``corrected_plant``; written as a plant
+file only with ``--corrected-plant FILE``) and shows the fit before/after on estimation and
+held-out data. Held-out data: ``--validate BAG2``, else the last 30 % of the recording. ``--json``
 writes the diagnose JSON; ``--report DIR`` writes figures and an index.html.
 
 With ``--sim SIM_BAG`` (a recording of the user's own simulator) instead of a plant file,
@@ -63,7 +64,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true",
                    help="no progress bar on the terminal (there is none when not a terminal)")
     p.add_argument("--corrected-plant", metavar="FILE",
-                   help="also write the corrected plant as a YAML plant file")
+                   help="write the corrected plant (the nominal one with the effects "
+                        "found) as a YAML plant file; without it the corrected plant is in "
+                        "the JSON and the report only")
     p.add_argument("--report", metavar="DIR", help="write figures (PNG) and DIR/index.html")
 
 

@@ -10,6 +10,8 @@ function                 shows
 ``fit_bars``             NRMSE before/after, estimation and held-out, force and speed
 ``effect_before_after``  one named effect: the residual without it and with it, side by
                          side over the effect's own axis, its fitted curve over the first
+``unexplained_curve``    an ``unexplained`` force: the curve the diagnose JSON keeps of it
+                         over its axis (positions in mm), its region shaded
 =======================  ====================================================================
 
 Each returns a :class:`~.base.Plot` whose ``data`` holds what was drawn, read back from the
@@ -180,6 +182,39 @@ def effect_before_after(result: DiagnoseResult, name: str,
                 "before (left, the fitted curve in red) and after (right) it is modelled.",
                 {"arg": np.asarray(pb.get_xdata()), "before": np.asarray(pb.get_ydata()),
                  "after": np.asarray(pa.get_ydata()), "curve": np.asarray(curve.get_ydata())})
+
+
+AXIS_LABELS = {"m": ("position (mm)", 1e3), "m/s": ("speed (m/s)", 1.0),
+               "N": ("thrust (N)", 1.0), "s": ("time (s)", 1.0)}
+
+
+@styled
+def unexplained_curve(params: dict[str, Any]) -> Plot:
+    """The curve an ``unexplained`` entry keeps (``curve``: ``at``, ``force_n``) over its
+    axis, with its region shaded. DataError when the entry holds no curve."""
+    from ..core.errors import DataError
+
+    curve = params.get("curve") or {}
+    at, force = curve.get("at") or [], curve.get("force_n") or []
+    if len(at) < 2 or len(at) != len(force):
+        raise DataError("unexplained: the diagnosis keeps no curve of it")
+    label, scale = AXIS_LABELS.get(str(params.get("unit", "")), (str(params.get("axis")), 1.0))
+    fig = new_figure(6.0, 3.0)
+    ax = fig.subplots()
+    x = np.asarray(at, dtype=np.float64) * scale
+    (line,) = ax.plot(x, force, color="tab:red", marker=".", label="unexplained force")
+    region = params.get("region")
+    if region:
+        ax.axvspan(float(region[0]) * scale, float(region[1]) * scale, color="0.85",
+                   label="where it stands out")
+    ax.set_xlabel(label)
+    ax.set_ylabel("force (N)")
+    ax.legend(loc="best")
+    what = label.split(" (")[0]
+    return Plot(fig, "effect_unexplained",
+                f"unexplained: the force left after the named effects, over {what}, as a "
+                "smooth curve (shaded: where it stands out from the rest).",
+                {"x": np.asarray(line.get_xdata()), "force": np.asarray(line.get_ydata())})
 
 
 def figures(result: DiagnoseResult) -> list[Plot]:

@@ -16,12 +16,13 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from ..core.discrepancy.words import significance_text, unexplained_text
 from ..core.errors import PmsmSysidError
 from .html import Block, Facts, Image, Note, Section, Table
 
 UNITS = (("_n_per_mps", "N·s/m"), ("_n_per_m", "N/m"), ("_mps", "m/s"), ("_kg", "kg"),
          ("_rad", "rad"), ("_n", "N"), ("_m", "m"), ("_s", "s"))
-HIDDEN = ("_means_n", "window_rms_n")
+HIDDEN = ("_means_n", "window_rms_n", "curve")
 
 
 def _v(x: Any) -> str:
@@ -37,13 +38,45 @@ def _v(x: Any) -> str:
 
 
 def _plant(p: Mapping[str, Any]) -> Facts:
-    return Facts(tuple((str(k), _v(v)) for k, v in p.items() if not isinstance(v, dict)))
+    """A plant's keys; each effect block (a mapping) as its own rows, ``effect.key``."""
+    rows: list[tuple[str, str]] = []
+    for k, v in p.items():
+        if isinstance(v, dict):
+            rows += [(f"{k}.{sub}", _param(sub, x, None)[1]) for sub, x in v.items()]
+        else:
+            rows.append((str(k), _param(str(k), v, None)[1]))
+    return Facts(tuple(rows))
+
+
+def _added(nominal: Mapping[str, Any], corrected: Mapping[str, Any]) -> list[str]:
+    return [k for k, v in corrected.items() if isinstance(v, dict) and nominal.get(k) != v]
+
+
+def corrected_section(d: Mapping[str, Any]) -> Section:
+    """The corrected plant: the nominal (or the simulation's fitted) plant with the effects
+    found, their rows first."""
+    nominal, corrected = d.get("plant") or {}, d.get("corrected_plant") or {}
+    added = _added(nominal, corrected)
+    base = ("the simulation's plant" if d.get("reference") == "sim_recording"
+            else "the nominal plant")
+    what = ", ".join(f"{k} {'changed' if k in nominal else 'added'}" for k in added)
+    note = (f"{base} with {what} (write it as a plant file with diagnose --corrected-plant "
+            "FILE)" if added else f"no effect added: the corrected plant is {base}")
+    ordered = {**{k: corrected[k] for k in added}, **{k: v for k, v in corrected.items()
+                                                       if k not in added}}
+    return Section("Corrected plant", (Note(note), _plant(ordered)))
+
+
+def _params_text(e: Mapping[str, Any]) -> str:
+    params = e.get("params") or {}
+    if e.get("name") == "unexplained":
+        return unexplained_text(params)
+    return _v({k: v for k, v in params.items() if not k.endswith(HIDDEN)})
 
 
 def effects_table(d: Mapping[str, Any]) -> Table:
-    rows = tuple((str(e["name"]), _v({k: v for k, v in (e.get("params") or {}).items()
-                                      if not k.endswith("_means_n")}),
-                  _v(e.get("significance")), f"{100 * float(e.get('explains') or 0):.1f}%",
+    rows = tuple((str(e["name"]), _params_text(e), significance_text(e.get("significance")),
+                  f"{100 * float(e.get('explains') or 0):.1f}%",
                   str(e.get("confidence", "n/a"))) for e in d.get("effects") or [])
     return Table("Named effects (significance = -log10 p; explains = share of the mismatch)",
                  ("effect", "parameters", "significance", "explains", "confidence"), rows)
@@ -63,18 +96,29 @@ def fit_table(d: Mapping[str, Any]) -> Table:
                            "speed after"), tuple(rows))
 
 
-def _where_row(w: Mapping[str, Any]) -> tuple[str, str, str]:
-    """One row of the 'where' table; entries without a share (the GFRF comparison) say n/a."""
+def _share(x: Any, sign: str = "") -> str:
+    return "n/a" if x is None else f"{sign}{100 * float(x):.1f}%"
+
+
+def _where_row(w: Mapping[str, Any]) -> tuple[str, str, str, str]:
+    """One row of the 'where' table; entries without a share (the GFRF comparison) say n/a.
+    A significance the JSON holds as null is one whose p underflowed (> 300)."""
     axis = str(w.get("axis")) + (f" ({w['source']})" if w.get("source") else "")
-    share = w.get("share")
-    return axis, ("n/a" if share is None else f"{100 * float(share):.1f}%"), _v(
-        w.get("significance"))
+    sig = w.get("significance")
+    if sig is None and w.get("share") is not None:
+        sig = math.inf
+    return (axis, _share(w.get("added_share"), "+") if "added_share" in w else "n/a",
+            _share(w.get("share")), significance_text(sig))
 
 
 def where_table(d: Mapping[str, Any]) -> Table:
-    rows = tuple(_where_row(w) for w in (d.get("mismatch") or {}).get("where") or [])
-    return Table("Where the nominal plant's residual lives", ("axis", "share", "significance"),
-                 rows)
+    where = list((d.get("mismatch") or {}).get("where") or [])
+    where.sort(key=lambda w: -float(w.get("added_share", -1.0)))
+    return Table("Where the nominal plant's residual lives: each axis adds what it explains "
+                 "beyond the axes above it (these add up to at most 100 %); alone, the axes "
+                 "overlap (a force over speed shows over time too) and do not add up",
+                 ("axis", "adds", "alone", "significance (-log10 p)"),
+                 tuple(_where_row(w) for w in where))
 
 
 def json_sections(d: Mapping[str, Any]) -> list[Section]:
@@ -94,7 +138,7 @@ def json_sections(d: Mapping[str, Any]) -> list[Section]:
             Section("Sim-to-real: named effects and fit", tuple(found)),
             Section("Simulation's plant (fitted from its recording)" if fitted
                     else "Nominal plant", tuple(plants)),
-            Section("Corrected plant", (_plant(d.get("corrected_plant") or {}),))]
+            corrected_section(d)]
 
 
 def _find(name: Any, json_path: Path) -> Path | None:
@@ -207,16 +251,23 @@ def effect_sections(d: Mapping[str, Any], result: Any,
     """One section per named effect of the diagnose JSON ``d``: parameters, confidence,
     evidence and its before/after figure (drawn from ``result``, the repeated diagnosis;
     when it is None the section says ``why`` instead)."""
-    from ..plots.diagnose import effect_before_after
+    from ..plots.diagnose import effect_before_after, unexplained_curve
 
     out = []
     for e in d.get("effects") or []:
         std = e.get("params_std") or {}
         params = tuple(_param(k, v, std.get(k)) for k, v in (e.get("params") or {}).items()
                        if not k.endswith(HIDDEN))
+        if e["name"] == "unexplained":
+            params = (("what", unexplained_text(e.get("params") or {})),)
         blocks: list[Block] = [Facts(params or (("parameters", "none"),)),
                                Facts(_evidence(e))]
-        if result is None:
+        if e["name"] == "unexplained":
+            try:  # the JSON keeps the curve itself: no repeated diagnosis needed
+                blocks.append(draw(unexplained_curve(dict(e.get("params") or {}))))
+            except PmsmSysidError as exc:
+                blocks.append(Note(f"figure not drawn: {exc}"))
+        elif result is None:
             blocks.append(Note(f"before/after figure not drawn: {why}"))
         else:
             try:

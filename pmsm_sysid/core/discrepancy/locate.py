@@ -4,8 +4,10 @@ Each axis gets a generic, physics-free basis -- 16 equal time windows, 16 positi
 16 velocity bins (quantiles), and a sin/cos pair at the strongest spectral line -- and the
 basis is put to the same prewhitened nested F-test as the library effects (:mod:`.stats`),
 against whatever model is already fitted. ``share`` is the fraction of the residual energy
-the basis explains. Run on the nominal residual this says where the mismatch is; run on the
-residual of the final model it finds what no library effect explained (``unexplained``).
+the basis explains on its own; the axes overlap, so ``added_share`` (in the details) is what
+each adds beyond the axes that explain more on their own: those add up to at most 1. Run
+on the nominal residual this says where the mismatch is; run on the residual of the final
+model it finds what no library effect explained (``unexplained``).
 """
 
 from __future__ import annotations
@@ -139,14 +141,16 @@ def _sincos(t: FloatArray, f: float) -> FloatArray:
 
 def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
               n_bins: int = N_BINS, total: float | None = None,
-              null_whitening: bool = False, thrust: bool = False) -> list[AxisFinding]:
+              null_whitening: bool = False, thrust: bool = False,
+              extra: dict[str, tuple[FloatArray, float]] | None = None) -> list[AxisFinding]:
     """Axis findings for residual target ``y`` beyond the columns ``base`` (module doc).
 
     Shares are fractions of ``total`` (default: the energy of ``y``). ``null_whitening``
     (see :func:`.stats.nested_f_test`) keeps the bin tests at their level when ``y`` beyond
     ``base`` is noise, as it is when looking for what the final model left unexplained;
     describing a raw mismatch, where ``y`` is mostly the effect, it would whiten the effect
-    away.
+    away. ``extra``: axis -> (columns, share alone) that describe an axis beside its bins
+    (the best cogging period over position), counted in its ``added_share``.
     """
     t = thinned_times(data)
     x = thinned(data, data.x)
@@ -183,4 +187,29 @@ def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
     out.append(AxisFinding("frequency", float(r @ r - r1 @ r1) / yy, sig,
                            {"line_hz": f0, "line_power_share": line_share,
                             "line_to_local_level": ratio}))
+    every = {**bases, "frequency": cols}
+    alone = {f.axis: f.share for f in out}
+    for axis, (more, share) in (extra or {}).items():
+        every[axis] = np.hstack([every[axis], more])
+        alone[axis] = max(alone[axis], share)
+    added = added_shares(y, base, every, alone, yy)
+    return [AxisFinding(f.axis, f.share, f.significance,
+                        {**f.details, "added_share": added[f.axis]}) for f in out]
+
+
+def added_shares(y: FloatArray, base: FloatArray, bases: dict[str, FloatArray],
+                 alone: dict[str, float], total: float) -> dict[str, float]:
+    """What each axis explains beyond the axes that explain more on their own (taken in that
+    order, as ERR takes terms): the axes overlap (a force over speed shows over time too),
+    so their ``share`` alone does not add up; these do, to at most the whole residual."""
+    cols = base
+    _, r = lstsq(cols, y)
+    before = float(r @ r)
+    out = {}
+    for axis in sorted(bases, key=lambda a: -alone[a]):
+        cols = np.hstack([cols, bases[axis]])
+        _, r = lstsq(cols, y)
+        now = float(r @ r)
+        out[axis] = max(before - now, 0.0) / total
+        before = now
     return out

@@ -117,10 +117,10 @@ class AxisModel:
             a -= 1
         while b < len(grid) - 1 and inside[b + 1]:
             b += 1
-        kind = "friction (force x sign of speed)" if self.axis == "position_friction" \
-            else "spline"
+        kind = ", friction (force x sign of speed)" if self.axis == "position_friction" \
+            else ""
         pick = np.linspace(0, len(grid) - 1, 15).astype(int)
-        return {"model": f"cubic B-spline over {self.axis.split('_')[0]}, {kind}",
+        return {"model": f"cubic B-spline over {self.axis.split('_')[0]}{kind}",
                 "region": [float(grid[a]), float(grid[b])], "peak_at": float(grid[k]),
                 "peak_n": float(rel[k]), "width": float(grid[b] - grid[a]),
                 "unit": UNITS[self.axis],

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from ..physics.plant import Plant, plant_to_dict
 from ..plantfit.found import FoundEffect, effect_line
 from .locate import AxisFinding
+from .words import unexplained_text, where_text
 
 if TYPE_CHECKING:
     from .sidebyside import SimComparison
@@ -80,8 +81,9 @@ class DiagnoseResult:
                          + (" in the library" if self.effects else ""))
         elif self.against is not None:
             lines.append("what the real drive has beyond the simulation:")
-        for e in self.effects:
-            lines.append(effect_line(e))
+        for e in self.effects:  # an unexplained force in words, where it acts
+            lines.append(effect_line(e, unexplained_text(e.params)
+                                     if e.name == "unexplained" else None))
             lines += [f"    note: {n}" for n in e.notes]
         if self.against is not None and self.against.sim_only:
             lines.append("what the simulation has that the real drive lacks:")
@@ -97,10 +99,10 @@ class DiagnoseResult:
                          "residual) failing: "
                          f"before {', '.join(fails['before']) or 'none'}; "
                          f"after {', '.join(fails['after']) or 'none'}")
-        strong = [w for w in self.where if w.significance >= 3.0]
-        if strong and self.effects:
-            lines.append("mismatch lives over: " + ", ".join(
-                f"{w.axis} ({w.share:.0%})" for w in sorted(strong, key=lambda w: -w.share)))
+        lives = where_text(self.where)
+        if lives and self.effects:
+            lines.append(f"mismatch lives over: {lives} (each axis: what it explains beyond "
+                         "the ones before it)")
         if self.gfrf is not None:
             st = self.gfrf.get("structure") or {}
             what = (f"NARX ny={st['ny']} nu={st['nu']} degree {st['degree']}, "

@@ -25,6 +25,7 @@ from ..physics.plant import Plant
 from ..plantfit.estimate import Fit, contributions, design
 from ..plantfit.found import FoundEffect
 from ..plantfit.kinematics import EquationData
+from ..plantfit.library import columns
 from ..plantfit.select import Step
 from ..plantfit.stats import (
     HeldOutTest,
@@ -48,8 +49,9 @@ MAX_LAG = 20
 
 def where_table(data: EquationData, ranking: list[Step]) -> list[AxisFinding]:
     """Axis scan of the nominal residual, the position axis with its periodogram peak."""
-    found = scan_axes(data, data.y, np.zeros((data.n, 0)))
     cog = next((s for s in ranking if s.effect.name == "cogging"), None)
+    period = None if cog is None else {"position": (columns(cog.effect, data), cog.share)}
+    found = scan_axes(data, data.y, np.zeros((data.n, 0)), extra=period)
     out = []
     for f in found:
         if f.axis == "position" and cog is not None:

@@ -61,11 +61,13 @@ def _fmt(value: Any, std: float | None) -> str:
     return str(value)
 
 
-def effect_line(e: FoundEffect) -> str:
-    """One line for people: the parameters with their errors, the evidence, the confidence."""
+def effect_line(e: FoundEffect, described: str | None = None) -> str:
+    """One line for people: the parameters with their errors (or ``described``, the effect
+    in words), the evidence, the confidence."""
     keys = [k for k in e.params
             if not k.endswith("_means_n") and k not in ("window_rms_n", "curve")]
-    params = ", ".join(f"{k}={_fmt(e.params[k], e.params_std.get(k))}" for k in keys)
+    params = described or ", ".join(f"{k}={_fmt(e.params[k], e.params_std.get(k))}"
+                                    for k in keys)
     sig = f">{SIGNIFICANCE_CAP:.0f}" if e.significance >= SIGNIFICANCE_CAP \
         else f"{e.significance:.1f}"
     held = ""
