@@ -53,7 +53,7 @@ WHERE = [  # the EMPS nominal residual: alone the axes overlap (72 + 7 + 96 > 10
 def test_where_the_mismatch_lives_adds_up_to_at_most_100_percent() -> None:
     assert where_text(WHERE) == "velocity 96 %"  # the others are not significant
     strong = [dict(w, significance=10.0) for w in WHERE[:3]]
-    assert where_text(strong) == "velocity 96 %, time +1 %, position +0 %"
+    assert where_text(strong) == "velocity 96 %, time +1 %"  # position adds +0.1 %: left out
     table = where_table({"mismatch": {"where": WHERE}})
     assert table.header == ("axis", "adds", "alone", "significance (-log10 p)")
     assert table.rows[0] == ("velocity", "+95.7%", "95.7%", ">300")  # null: p underflowed

@@ -87,4 +87,5 @@ def where_text(where: Sequence[Any], min_significance: float = 3.0) -> str:
             continue
         rows.append((str(d["axis"]), float(d.get("added_share", d["share"]))))
     rows.sort(key=lambda r: -r[1])
+    rows = rows[:1] + [r for r in rows[1:] if r[1] >= 0.005]  # nothing that rounds to +0 %
     return ", ".join(f"{a} {'+' if i else ''}{100 * s:.0f} %" for i, (a, s) in enumerate(rows))
