@@ -291,6 +291,15 @@ def test_monitor_cli_once_writes_json(ros_env: int, tmp_path: Path) -> None:
     assert "thrust" in proc.stdout and "model: none yet" in proc.stdout
     assert max(len(line) for line in proc.stdout.splitlines()) <= 80  # piped: 80 columns
     assert "\x1b[" not in proc.stdout  # piped: plain text, no colours or cursor moves
+    # ... and says what to check (it showed zeros without a hint)
+    text = " ".join(proc.stdout.split())
+    assert "nothing received on /quiet yet: is a pipeline publishing there with " \
+           f"ROS_DOMAIN_ID={ros_env}?" in text
+    proc = subprocess.run(
+        [sys.executable, "-m", "pmsm_sysid.cli", "monitor", "--once", "--duration", "0.5",
+         "--namespace", "/quiet", "--json", "-"], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and json.loads(proc.stdout)["namespace"] == "/quiet"
+    assert proc.stderr.startswith("pmsm-sysid monitor: nothing received on /quiet yet")
 
 
 def test_monitor_cli_bad_interval_is_one_line(ros_env: int) -> None:
