@@ -395,7 +395,7 @@ def test_gfrf_of_impossible_models_is_one_line(tmp_path: Path,
     assert_one_line_error(run_cli("gfrf", str(lag)), "largest lag 5000 exceeds 1024")
     for fs, says in ((0.0, "sample_rate_hz must be a positive number, got 0.0"),
                      (-500.0, "sample_rate_hz must be a positive number, got -500.0"),
-                     ("fast", "not a model JSON")):
+                     ("fast", 'sample_rate_hz must be a number, got "fast"')):
         cli_error(capsys, ["gfrf", str(_model_file(tmp_path / "fs.json", ok,
                                                    sample_rate_hz=fs))], says)
     nan = tmp_path / "nan.json"

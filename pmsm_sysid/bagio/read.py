@@ -112,7 +112,8 @@ _VALUE: dict[str, Callable[[Any], float]] = {
 }
 
 
-def _read_triple(reader: Any, chosen: dict[str, str], until: int | None) -> dict[str, _Stream]:
+def _read_triple(reader: Any, chosen: dict[str, str],
+                 until: int | None) -> tuple[dict[str, _Stream], bool]:
     store = typestore()
     by_topic = {topic: signal for signal, topic in chosen.items()}
     streams: dict[str, _Stream] = {s: _stream() for s in chosen}
@@ -128,8 +129,8 @@ def _read_triple(reader: Any, chosen: dict[str, str], until: int | None) -> dict
         stamps.append(got[0])
         values.append(got[1])
         if len(stamps) % 256 == 0 and _enough(streams, until):
-            break
-    return streams
+            return streams, True  # stopped early: the samples asked for are read
+    return streams, False
 
 
 def _joint_index(names: list[str], joint_name: str | None, seen: set[str]) -> int | None:
@@ -140,13 +141,14 @@ def _joint_index(names: list[str], joint_name: str | None, seen: set[str]) -> in
 
 
 def _read_joint(path: Path, reader: Any, topic: str, joint_name: str | None,
-                until: int | None) -> dict[str, _Stream]:
+                until: int | None) -> tuple[dict[str, _Stream], bool]:
     """JointState layout: effort = thrust, velocity = speed, position = position."""
     store = typestore()
     streams: dict[str, _Stream] = {s: _stream() for s in SIGNALS}
     fields = {tp.THRUST: "effort", tp.SPEED: "velocity", tp.POSITION: "position"}
     seen: set[str] = set()
     conns = [c for c in reader.connections if c.topic == topic]
+    stopped = False
     for conn, _, data in reader.messages(connections=conns):
         msg: Any = store.deserialize_cdr(data, conn.msgtype)
         k = _joint_index(list(msg.name), joint_name, seen)
@@ -159,6 +161,7 @@ def _read_joint(path: Path, reader: Any, topic: str, joint_name: str | None,
                 streams[signal][0].append(stamp)
                 streams[signal][1].append(float(arr[k]))
         if _enough({s: streams[s] for s in (tp.THRUST, tp.POSITION)}, until):
+            stopped = True
             break
     if joint_name is None and len(seen) > 1:
         raise BagError(f"{path}: {topic} carries joints {', '.join(sorted(seen))}; say which "
@@ -169,7 +172,7 @@ def _read_joint(path: Path, reader: Any, topic: str, joint_name: str | None,
         raise BagError(f"{path}: no {what} with positions on {topic} (joints: {names})")
     if not streams[tp.THRUST][0]:
         raise BagError(f"{path}: {topic} carries no effort (thrust) for the joint")
-    return streams
+    return streams, stopped
 
 
 def _seconds(stream: _Stream) -> tuple[np.ndarray[Any, np.dtype[np.float64]],
@@ -216,8 +219,8 @@ def _check_time_axis(path: Path, streams: dict[str, _Stream], topics: dict[str, 
     re-sorted; neither repeats a stamp with another value."""
     for signal, (stamps_a, values_a) in streams.items():
         stamps = np.frombuffer(stamps_a, dtype=np.int64)
-        if len(stamps) < 2:
-            continue
+        if len(stamps) < 2 or stamps.min() == stamps.max():
+            continue  # one stamp on every message: the aligner names an unstamped publisher
         values = np.frombuffer(values_a, dtype=np.float64)
         order = np.argsort(stamps, kind="stable")
         s, v = stamps[order], values[order]
@@ -259,20 +262,21 @@ def read_recording(
         found = {c.topic: c.msgtype for c in reader.connections}
         layout = _choose_layout(path, found, namespace)
         if "joint_state" in layout:
-            streams = _read_joint(path, reader, layout["joint_state"], joint_name, until_sample)
+            streams, stopped = _read_joint(path, reader, layout["joint_state"], joint_name,
+                                           until_sample)
             used = {layout["joint_state"]: tp.JOINT_STATE_TYPE}
         else:
             if joint_name is not None:
                 raise BagError(f"{path}: a joint was named ('{joint_name}') but the inputs are "
                                f"{', '.join(layout.values())}, not a JointState topic")
-            streams = _read_triple(reader, layout, until_sample)
+            streams, stopped = _read_triple(reader, layout, until_sample)
             used = {topic: found[topic] for topic in layout.values()}
             empty = [layout[s] for s in (tp.THRUST, tp.POSITION) if not streams[s][0]]
             if empty:
                 raise BagError(f"{path}: no messages on {' and '.join(empty)} (empty recording)")
         custom = getattr(reader.storage.metadata, "custom", None) or {}
-    complete = not _enough(streams, until_sample)
-    if not complete:
+    complete = not stopped
+    if stopped:
         streams = _common_horizon(streams)
     topics = {s: layout.get(s, layout.get("joint_state", s)) for s in SIGNALS}
     nonfinite = _nonfinite(streams, topics)
