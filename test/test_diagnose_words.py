@@ -79,7 +79,8 @@ def _diagnosis() -> dict[str, Any]:
 def test_the_corrected_plant_on_the_page_holds_the_effects_found() -> None:
     section = corrected_section(_diagnosis())
     note, facts = section.blocks
-    assert note.text.startswith("the nominal plant with coulomb_friction, force_offset added")
+    assert note.text.startswith("the nominal plant with coulomb_friction added, force_offset "
+                                "added")
     assert "--corrected-plant FILE" in note.text
     rows = dict(facts.items)
     assert rows["coulomb_friction.amplitude_n"] == "20.507 N"
