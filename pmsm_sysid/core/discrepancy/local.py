@@ -30,6 +30,7 @@ N_INTERVALS = 14
 FWHM = 2.0 * math.sqrt(2.0 * math.log(2.0))
 
 WIDTHS = tuple(f / N_INTERVALS for f in (0.25, 0.5, 1.0))  # σ as a fraction of the range
+CHUNK = 16  # bump columns filtered at a time (memory)
 
 
 def bump_column(x: FloatArray, centre: float, sigma: float) -> FloatArray:
@@ -56,18 +57,20 @@ def local_grid(data: EquationData) -> tuple[list[tuple[float, float]], float]:
 
 def best_bump(data: EquationData, y: FloatArray,
               base: FloatArray) -> tuple[float, float] | None:
-    """The member that explains most of ``y`` beyond ``base`` (least squares)."""
+    """The member that explains most of ``y`` beyond ``base`` (least squares); the members
+    are filtered ``CHUNK`` at a time, so memory does not grow with their number."""
     members, _ = local_grid(data)
     if not members:
         return None
-    raw = np.column_stack([bump_column(data.x, c, s) for c, s in members])
-    cols = data.project(raw)
-    if base.shape[1]:
-        q = np.linalg.qr(base)[0]
-        cols = cols - q @ (q.T @ cols)
-        y = y - q @ (q.T @ y)
-    norm = np.einsum("nk,nk->k", cols, cols)
-    gain = (cols.T @ y) ** 2 / np.maximum(norm, 1e-300)
+    q = np.linalg.qr(base)[0] if base.shape[1] else np.zeros((len(y), 0))
+    y = y - q @ (q.T @ y)
+    gain = np.empty(len(members))
+    for start in range(0, len(members), CHUNK):
+        chunk = members[start:start + CHUNK]
+        cols = data.project(np.column_stack([bump_column(data.x, c, s) for c, s in chunk]))
+        cols -= q @ (q.T @ cols)
+        norm = np.einsum("nk,nk->k", cols, cols)
+        gain[start:start + len(chunk)] = (cols.T @ y) ** 2 / np.maximum(norm, 1e-300)
     return members[int(np.argmax(gain))]
 
 

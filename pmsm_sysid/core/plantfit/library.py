@@ -43,7 +43,7 @@ FIXED = ("force_offset", "coulomb_friction", "viscous_error", "mass_error", "spr
 
 OVERSAMPLE = 4  # grid points per independent wavenumber / Stribeck velocity
 MAX_CYCLE_HZ_FACTOR = 1.0  # a position period must pass the filter at the median speed
-CHUNK = 96  # columns filtered at a time (memory)
+CHUNK = 32  # columns filtered at a time (memory)
 MAX_PITCHES = 400
 MIN_PERIODS = 2.0  # periods over the travel for a position-periodic force to be told apart
 
@@ -206,14 +206,21 @@ def families(data: EquationData, exclude: tuple[str, ...] = ()) -> list[Family]:
     return out
 
 
-def family_columns(fam: Family, data: EquationData) -> FloatArray:
-    """Filtered columns of every member, shape (members, n, width)."""
+def family_chunks(fam: Family, data: EquationData) -> Iterator[tuple[int, FloatArray]]:
+    """Filtered columns of the members, ``CHUNK`` columns at a time: (first member index,
+    array of shape (members in chunk, n, width))."""
     width = fam.members[0].width
-    out = np.empty((len(fam.members), data.n, width))
     for start, chunk in _chunks(fam.members, max(1, CHUNK // width)):
         raw = np.concatenate([raw_columns(e, data) for e in chunk], axis=1)
         proj = data.project(raw)
-        out[start:start + len(chunk)] = proj.reshape(data.n, len(chunk), width).transpose(1, 0, 2)
+        yield start, proj.reshape(data.n, len(chunk), width).transpose(1, 0, 2)
+
+
+def family_columns(fam: Family, data: EquationData) -> FloatArray:
+    """Filtered columns of every member, shape (members, n, width)."""
+    out = np.empty((len(fam.members), data.n, fam.members[0].width))
+    for start, cols in family_chunks(fam, data):
+        out[start:start + len(cols)] = cols
     return out
 
 

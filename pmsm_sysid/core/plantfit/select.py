@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .kinematics import EquationData, thinned
-from .library import Effect, Family, columns, families, family_columns
+from .library import Effect, Family, columns, families, family_chunks
 from .stats import NestedTest, lstsq, nested_f_test
 
 FloatArray = NDArray[np.float64]
@@ -61,13 +61,22 @@ class Candidates:
 
     @classmethod
     def build(cls, data: EquationData, exclude: tuple[str, ...] = ()) -> Candidates:
+        """Columns filtered a chunk at a time, Grams accumulated from the float64 chunk,
+        the float32 cache filled in place: the only copy of a family's columns kept."""
         fams = tuple(families(data, exclude))
         cols, grams, gys = [], [], []
         for f in fams:
-            c = family_columns(f, data)
-            grams.append(np.einsum("knm,knp->kmp", c, c))
-            gys.append(np.einsum("knm,n->km", c, data.y))
-            cols.append(c.astype(np.float32))
+            k, m = len(f.members), f.members[0].width
+            c32 = np.empty((k, data.n, m), dtype=np.float32)
+            gram, gy = np.empty((k, m, m)), np.empty((k, m))
+            for start, c in family_chunks(f, data):
+                stop = start + len(c)
+                gram[start:stop] = np.einsum("knm,knp->kmp", c, c)
+                gy[start:stop] = np.einsum("knm,n->km", c, data.y)
+                c32[start:stop] = c
+            cols.append(c32)
+            grams.append(gram)
+            gys.append(gy)
         return cls(fams, tuple(cols), tuple(grams), tuple(gys))
 
 
