@@ -25,10 +25,10 @@ from pmsm_sysid.core.physics.plant import (
     nominal_plant,
 )
 from pmsm_sysid.core.plantfit.averaging import interval_force, interval_friction
+from pmsm_sysid.core.plantfit.feedback import feedback_z
 from pmsm_sysid.core.plantfit.kinematics import (
     choose_filter,
     equation_data,
-    feedback_z,
     smoothed_speed_noise,
 )
 from pmsm_sysid.core.plantfit.library import Effect, columns

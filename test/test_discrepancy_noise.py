@@ -85,7 +85,7 @@ def test_one_ms_actuator_lag_with_random_binary_inputs(kind: str) -> None:
     """A held random input is strongly autocorrelated and the motion answers it at once:
     that is no feedback. The 1 ms lag is named (not a delay, not a mass/viscous change)."""
     from pmsm_sysid.core.physics.plant import ThrustLag
-    from pmsm_sysid.core.plantfit.kinematics import FEEDBACK_Z, feedback_z
+    from pmsm_sysid.core.plantfit.feedback import FEEDBACK_Z, feedback_z
 
     noise = Noise(speed_std=0.001, position_std=2e-6, force_std=0.3)
     plant = nominal_plant().with_effects(noise=noise, quantisation=QUANT,
@@ -101,7 +101,7 @@ def test_one_ms_actuator_lag_with_random_binary_inputs(kind: str) -> None:
 
 def test_thrust_sensor_noise_is_not_feedback() -> None:
     """Open loop with 5 N of thrust-sensor noise (the paper bags' noise): not a loop."""
-    from pmsm_sysid.core.plantfit.kinematics import FEEDBACK_Z, feedback_z
+    from pmsm_sysid.core.plantfit.feedback import FEEDBACK_Z, feedback_z
 
     noise = Noise(speed_std=0.002, position_std=5e-6, force_std=1.0, thrust_std=5.0)
     for seed in (1, 2, 3):

@@ -38,6 +38,7 @@ from ..plantfit.fit import FitOptions, Segments, correct, fit_effects, segments
 from ..plantfit.found import FoundEffect, capped
 from ..plantfit.translate import effect_params
 from ..recording.signals import Recording
+from ..recording.spans import Excerpt
 from .gfrf_compare import gfrf_where
 from .nonparam import AxisModel
 from .result import Curves, DiagnoseResult
@@ -70,7 +71,7 @@ def _curves(segs: Segments, fit: Fit, replays: dict[str, Any]) -> Curves:
     return c
 
 
-def diagnose(plant: Plant, real: Recording, validate: Recording | None = None,
+def diagnose(plant: Plant, real: Recording | Excerpt, validate: Recording | Excerpt | None = None,
              options: DiagnoseOptions | None = None) -> DiagnoseResult:
     """The whole method of the module doc; raises DiagnoseError on unusable input."""
     opts = options or DiagnoseOptions()
@@ -82,9 +83,9 @@ def diagnose(plant: Plant, real: Recording, validate: Recording | None = None,
         raise DiagnoseError(f"diagnosis failed on these data: {exc}") from exc
 
 
-def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
+def _diagnose(plant: Plant, real: Recording | Excerpt, validate: Recording | Excerpt | None,
               opts: DiagnoseOptions) -> DiagnoseResult:
-    segs = segments(plant, real, validate, opts.split)
+    segs = segments(plant, real, validate, opts.split, opts.max_samples)
     closed = segs.closed_loop
     ef = fit_effects(plant, segs, opts)
     model = ef.model
@@ -112,7 +113,8 @@ def _diagnose(plant: Plant, real: Recording, validate: Recording | None,
     notes += capped_notes
     method = _method(segs, opts, ef.n_tests, validate is not None)
     method["feedback"] = {"z": segs.feedback, "closed_loop": closed}
-    gfrf = gfrf_where(plant, segs.recs["estimation"], opts.alpha) if opts.gfrf else None
+    gfrf = gfrf_where(plant, _middle(segs.pieces("estimation")), opts.alpha) if opts.gfrf \
+        else None
     if closed:
         notes.append(_CLOSED_NOTE)
     return DiagnoseResult(
@@ -167,6 +169,11 @@ def _best_curve(curves: list[tuple[FoundEffect, AxisModel]]) -> AxisModel | None
     return max(ok, key=lambda t: t[0])[1] if ok else None
 
 
+def _middle(parts: tuple[Recording, ...]) -> Recording:
+    """The central part (the GFRF comparison fits a NARX to one contiguous window)."""
+    return parts[len(parts) // 2]
+
+
 def _rank_dict(s: Any) -> dict[str, Any]:
     return {"candidate": s.effect.label(), "name": s.effect.name, "err": s.err,
             "share": s.share, "significance": capped(-s.significance)}
@@ -185,6 +192,7 @@ def _method(segs: Segments, opts: DiagnoseOptions, n_tests: float,
         "alpha": opts.alpha, "min_share": opts.min_share, "tests_searched": n_tests,
         "significance": "-log10 of the Bonferroni-corrected p-value (prewhitened F-test)",
         "sign_smoothing_mps": segs.est.sign_smoothing_mps,
+        "data_used": segs.used,
     }
 
 

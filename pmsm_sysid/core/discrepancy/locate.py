@@ -12,6 +12,7 @@ model it finds what no library effect explained (``unexplained``).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -20,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from ..plantfit.kinematics import EquationData, thinned, thinned_times
+from ..plantfit.kinematics import EquationData, thinned, thinned_sizes, thinned_times
 from ..plantfit.stats import lstsq, nested_f_test
 
 FloatArray = NDArray[np.float64]
@@ -99,8 +100,8 @@ def _line_at(rc: FloatArray, tt: FloatArray, f: float) -> float:
     return float(abs(z) ** 2)
 
 
-def strongest_line(r: FloatArray, t: FloatArray, fs: float,
-                   u: FloatArray | None = None) -> tuple[float, float, float, int]:
+def strongest_line(r: FloatArray, t: FloatArray, fs: float, u: FloatArray | None = None,
+                   sizes: tuple[int, ...] = ()) -> tuple[float, float, float, int]:
     """The residual's most prominent spectral line, judged against its neighbours.
 
     A line is a bin whose power stands out of the residual's own spectrum around it (the
@@ -110,29 +111,50 @@ def strongest_line(r: FloatArray, t: FloatArray, fs: float,
     input puts there is the input's, not the plant's. The frequency is refined by least
     squares over ±1 bin (the periodogram peak is good to half a bin only).
 
+    ``sizes``: the lengths of the contiguous parts ``r`` is made of (spans of a long
+    recording); the periodogram is then each part's, averaged (every part cut to the
+    shortest): a line keeps its phase within a part, not across a gap, and the average of
+    K periodograms has 2K degrees of freedom per bin (:func:`line_dof`).
+
     Returns (frequency Hz, power share of the refined line, ratio to the local level,
     number of bins searched).
     """
-    rc = r - r.mean()
-    tt = t - t[0]
-    spec = np.abs(np.fft.rfft(rc)) ** 2
-    freqs = np.fft.rfftfreq(len(rc), 1.0 / fs)
+    pieces = _pieces(r, t, sizes)
+    n = min(len(p[0]) for p in pieces)
+    rcs = [(p[0][:n] - p[0][:n].mean(), p[1][:n] - p[1][0]) for p in pieces]
+    spec = np.mean([np.abs(np.fft.rfft(rc)) ** 2 for rc, _ in rcs], axis=0)
+    freqs = np.fft.rfftfreq(n, 1.0 / fs)
     ratio, level = _ratio(spec)
     ok = np.zeros(len(spec), dtype=bool)
     ok[2:len(spec) - 1] = True
     if u is not None:
-        uratio, _ = _ratio(np.abs(np.fft.rfft(u - u.mean())) ** 2)
+        ups = [p[0][:n] for p in _pieces(u, t, sizes)]
+        uspec = np.mean([np.abs(np.fft.rfft(x - x.mean())) ** 2 for x in ups], axis=0)
+        uratio, _ = _ratio(uspec)
         ok &= uratio < math.log(len(spec) / 1e-3)  # no significant input line at that bin
     if not ok.any():
         return 0.0, 0.0, 0.0, 1
     k = int(np.flatnonzero(ok)[np.argmax(ratio[ok])])
-    bin_hz = fs / len(r)
-    best = (spec[k], float(freqs[k]))
+    bin_hz = fs / n
+    best = (float(spec[k]), float(freqs[k]))
     for f in np.linspace(freqs[k] - bin_hz, freqs[k] + bin_hz, 41):
         if f > 0:
-            best = max(best, (_line_at(rc, tt, float(f)), float(f)))
-    share = 2.0 * best[0] / len(rc) / max(float(rc @ rc), 1e-300)
+            power = float(np.mean([_line_at(rc, tt, float(f)) for rc, tt in rcs]))
+            best = max(best, (power, float(f)))
+    energy = float(np.mean([rc @ rc for rc, _ in rcs]))
+    share = 2.0 * best[0] / n / max(energy, 1e-300)
     return best[1], min(share, 1.0), best[0] / max(float(level[k]), 1e-300), int(ok.sum())
+
+
+def _pieces(r: FloatArray, t: FloatArray,
+            sizes: tuple[int, ...]) -> list[tuple[FloatArray, FloatArray]]:
+    edges = np.cumsum([0, *(sizes or (len(r),))])
+    return [(r[a:b], t[a:b]) for a, b in itertools.pairwise(edges)]
+
+
+def line_dof(parts: int) -> tuple[int, int]:
+    """Degrees of freedom of a bin of the averaged periodogram over its local level."""
+    return 2 * parts, (4 * NEIGHBOURS - 4) * parts
 
 
 def _sincos(t: FloatArray, f: float) -> FloatArray:
@@ -178,11 +200,12 @@ def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
             details = _velocity_details(r, v)
         out.append(AxisFinding(axis, share, -test.corrected_log10_p(len(bases) + 1), details))
     u = data.project(data.force)
-    f0, line_share, ratio, n_freq = strongest_line(r, t, data.sample_rate_hz, u)
+    sizes = thinned_sizes(data)
+    f0, line_share, ratio, n_freq = strongest_line(r, t, data.sample_rate_hz, u, sizes)
     cols = _sincos(t - t[0], f0)
     _, r1 = lstsq(np.hstack([base, cols]), y)
-    dof2 = 4 * NEIGHBOURS - 4
-    logp = float(stats.f.logsf(ratio, 2, dof2)) / math.log(10.0) if f0 > 0 else 0.0
+    dof1, dof2 = line_dof(max(1, len(sizes)))
+    logp = float(stats.f.logsf(ratio, dof1, dof2)) / math.log(10.0) if f0 > 0 else 0.0
     sig = max(0.0, -(logp + math.log10(len(bases) + n_freq)))
     out.append(AxisFinding("frequency", float(r @ r - r1 @ r1) / yy, sig,
                            {"line_hz": f0, "line_power_share": line_share,

@@ -28,6 +28,9 @@ horizon. Plants without position-periodic forces keep ``HORIZON_S``.
 mean-square speed errors (before − after) gives a z-score: ``better`` (z ≥ ``Z_VERDICT``),
 ``worse`` (z ≤ −``Z_VERDICT``), ``unresolved`` (the replay cannot tell them apart) or
 ``same`` (one plant).
+
+A recording used in parts (spans of a long one, ``parts`` = their lengths) is replayed part
+by part: every part starts a horizon, and no horizon runs across the gap between two.
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ from ..recording.signals import Recording
 from ..validation.correlation import fit_metrics
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
 
 HORIZON_S = 0.25
 PERIODIC_LEFT = 0.05
@@ -61,21 +65,33 @@ class Replay:
     nrmse: float
     position: FloatArray | None = None
     horizon_samples: int = 0
+    parts: tuple[int, ...] = ()
 
 
-def replay(plant: Plant, rec: Recording, horizon_s: float = HORIZON_S) -> Replay:
+def ages(n: int, h: int, parts: tuple[int, ...] = ()) -> IntArray:
+    """Samples since the last restart: every ``h`` samples from the start of each part."""
+    starts = np.cumsum([0, *(parts or (n,))])[:-1]
+    first = np.zeros(n, dtype=np.int64)
+    first[starts] = starts
+    out: IntArray = (np.arange(n) - np.maximum.accumulate(first)) % h
+    return out
+
+
+def replay(plant: Plant, rec: Recording, horizon_s: float = HORIZON_S,
+           parts: tuple[int, ...] = ()) -> Replay:
     """Replay ``rec.thrust`` through ``plant`` (noise off), restarting every horizon."""
-    return _replay(plant, rec, max(2, round(horizon_s * rec.sample_rate_hz)))
+    return _replay(plant, rec, max(2, round(horizon_s * rec.sample_rate_hz)), parts)
 
 
-def _replay(plant: Plant, rec: Recording, h: int) -> Replay:
+def _replay(plant: Plant, rec: Recording, h: int, parts: tuple[int, ...] = ()) -> Replay:
     clean = replace(_clean(plant), sample_rate_hz=rec.sample_rate_hz)
     n = len(rec)
     sim = MotorSimulator(clean, seed=0, x0=float(rec.position[0]), v0=float(rec.speed[0]))
     out = np.empty(n)
     pos = np.empty(n)
+    restart = ages(n, h, parts) == 0
     for k in range(n):
-        if k % h == 0:
+        if restart[k]:
             sim.set_state(float(rec.position[k]), float(rec.speed[k]))
         st = sim.state
         out[k], pos[k] = st.speed_mps, st.position_m
@@ -84,7 +100,7 @@ def _replay(plant: Plant, rec: Recording, h: int) -> Replay:
             break
         sim.advance(float(rec.thrust[k]))
     return Replay(out, rec.speed, h / rec.sample_rate_hz, fit_metrics(rec.speed, out).nrmse,
-                  pos, h)
+                  pos, h, parts)
 
 
 def periodic_components(plant: Plant, thrust_rms: float) -> list[tuple[float, float]]:
@@ -126,7 +142,7 @@ def drift_profile(rp: Replay, rec: Recording) -> FloatArray:
         raise ValueError("the replay has no position")
     h = rp.horizon_samples
     err = (rp.position - rec.position) ** 2
-    age = np.arange(len(rec)) % h
+    age = ages(len(rec), h, rp.parts)
     ok = np.isfinite(err)
     ms = np.array([float(np.mean(err[(age == a) & ok])) if np.any((age == a) & ok)
                    else math.inf for a in range(h)])
@@ -157,8 +173,8 @@ class Horizon:
                 "reason": self.reason()}
 
 
-def choose_horizon(plants: tuple[Plant, ...], rec: Recording,
-                   max_s: float = HORIZON_S) -> Horizon:
+def choose_horizon(plants: tuple[Plant, ...], rec: Recording, max_s: float = HORIZON_S,
+                   parts: tuple[int, ...] = ()) -> Horizon:
     """The longest horizon (≤ ``max_s``) over which each plant's periodic forces stay
     within ``PERIODIC_LEFT`` of their energy (module doc), on this recording."""
     fs = rec.sample_rate_hz
@@ -171,7 +187,7 @@ def choose_horizon(plants: tuple[Plant, ...], rec: Recording,
         if not comps:
             continue
         s_max = allowed_drift(comps)
-        prof = drift_profile(_replay(plant, rec, h_max), rec)
+        prof = drift_profile(_replay(plant, rec, h_max, parts), rec)
         n_ok = int(np.searchsorted(prof, s_max, side="right"))
         ok = max(n_ok, floor)
         if ok <= h:
@@ -198,17 +214,17 @@ class ReplayComparison:
                 "horizon": self.horizon.to_dict()}
 
 
-def compare(before: Plant, after: Plant, rec: Recording,
-            horizon: Horizon | None = None) -> ReplayComparison:
+def compare(before: Plant, after: Plant, rec: Recording, horizon: Horizon | None = None,
+            parts: tuple[int, ...] = ()) -> ReplayComparison:
     """Replay ``rec`` through both plants at ``horizon`` (default: :func:`choose_horizon`)."""
-    hz = horizon if horizon is not None else choose_horizon((before, after), rec)
+    hz = horizon if horizon is not None else choose_horizon((before, after), rec, parts=parts)
     if hz.samples != round(hz.horizon_s * rec.sample_rate_hz):
         hz = replace(hz, samples=max(2, round(hz.horizon_s * rec.sample_rate_hz)))
-    rb = _replay(before, rec, hz.samples)
+    rb = _replay(before, rec, hz.samples, parts)
     if _clean(after) == _clean(before):
         return ReplayComparison(rb, rb, hz, 0.0, "same")
-    ra = _replay(after, rec, hz.samples)
-    z = _paired_z(rb.speed, ra.speed, rec.speed, hz.samples)
+    ra = _replay(after, rec, hz.samples, parts)
+    z = _paired_z(rb.speed, ra.speed, rec.speed, hz.samples, parts)
     verdict = "better" if z >= Z_VERDICT else "worse" if z <= -Z_VERDICT else "unresolved"
     return ReplayComparison(rb, ra, hz, z, verdict)
 
@@ -218,13 +234,24 @@ def _clean(plant: Plant) -> Plant:
     return replace(plant, noise=None, quantisation=None)
 
 
-def _paired_z(before: FloatArray, after: FloatArray, measured: FloatArray, h: int) -> float:
-    """z of the mean per-horizon drop in mean-square speed error (horizons independent)."""
-    n = len(measured) // h * h
-    if n < 2 * h:
+def _paired_z(before: FloatArray, after: FloatArray, measured: FloatArray, h: int,
+              parts: tuple[int, ...] = ()) -> float:
+    """z of the mean per-horizon drop in mean-square speed error (horizons independent;
+    only whole horizons count)."""
+    group = np.cumsum(ages(len(measured), h, parts) == 0) - 1
+    size = np.bincount(group)
+    whole = size[group] == h
+    if int(np.count_nonzero(size == h)) < 2:
         return 0.0
-    eb = ((before[:n] - measured[:n]) ** 2).reshape(-1, h).mean(axis=1)
-    ea = ((after[:n] - measured[:n]) ** 2).reshape(-1, h).mean(axis=1)
+    keep = np.flatnonzero(size == h)
+
+    def per_horizon(sim: FloatArray) -> FloatArray:
+        sq = (sim - measured) ** 2
+        out: FloatArray = np.bincount(group[whole], weights=sq[whole],
+                                      minlength=len(size))[keep] / h
+        return out
+
+    eb, ea = per_horizon(before), per_horizon(after)
     d = eb - ea
     if not np.all(np.isfinite(d)):
         return -math.inf if not np.all(np.isfinite(ea)) else math.inf

@@ -75,6 +75,10 @@ class DiagnoseResult:
         what = "the nominal plant" if self.against is None else "the simulation's plant"
         lines = self.against.summary_lines() if self.against is not None else []
         lines.append(f"equation-error NRMSE of {what}: {self.nrmse_before:.4f}")
+        for key, used in (self.method.get("data_used") or {}).items():
+            if not used.get("whole", True):
+                label = "" if key == "recording" else " (held-out recording)"
+                lines.append(f"data used{label}: {used['text']}")
         named = [e for e in self.effects if e.name != "unexplained"]
         if not named:
             lines.append("no significant missing physics"

@@ -181,13 +181,17 @@ def fit_table(plant: Plant, corrected: Plant, fit: Fit, segs: Any, do_replay: bo
     """
     table: dict[str, Any] = {}
     replays: dict[str, dict[str, FloatArray]] = {}
-    horizon = choose_horizon((plant, corrected), segs.recs["estimation"]) if do_replay \
-        else None
+    def sizes(name: str) -> tuple[int, ...]:
+        pieces = segs.pieces(name)
+        return tuple(len(p) for p in pieces) if len(pieces) > 1 else ()
+
+    horizon = choose_horizon((plant, corrected), segs.recs["estimation"],
+                             parts=sizes("estimation")) if do_replay else None
     for name, d in (("estimation", segs.est), ("validation", segs.val)):
         row = _segment_fit(fit, d, extra)
         if horizon is not None:
             rec = segs.recs[name]
-            cmp = compare(plant, corrected, rec, horizon)
+            cmp = compare(plant, corrected, rec, horizon, sizes(name))
             row["output_error"] = cmp.to_dict()
             replays[name] = {"t": rec.t, "measured": rec.speed, "before": cmp.before.speed,
                              "after": cmp.after.speed}

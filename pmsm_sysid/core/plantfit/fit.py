@@ -21,7 +21,7 @@ fitting a plant from a recording runs it with the mass and viscous terms searche
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -29,19 +29,14 @@ import numpy as np
 from ..errors import DiagnoseError, PlantError
 from ..physics.plant import Plant
 from ..recording.signals import Recording, check_finite
+from ..recording.spans import MAX_SAMPLES, Excerpt, excerpt_of, plan_spans
 from .estimate import Fit, design, refine
+from .feedback import FEEDBACK_Z, feedback_z
 from .found import FoundEffect, capped
-from .kinematics import (
-    FEEDBACK_Z,
-    EquationData,
-    FilterSpec,
-    choose_filter,
-    equation_data,
-    feedback_z,
-    kinematic_mode,
-)
+from .kinematics import EquationData, FilterSpec, choose_filter, kinematic_mode
 from .library import MIN_PERIODS, Effect, periods_seen
 from .modelling import Alternative, Model, confirmed_model
+from .parts import equation_data_parts
 from .select import ALPHA, MAX_EFFECTS, MIN_SHARE, Candidates, Step, forward_select, score_step
 from .stats import HeldOutTest, ar_whitener, lstsq, whiten
 from .translate import corrected_plant, effect_params
@@ -61,6 +56,8 @@ class FitOptions:
     min_share: float = MIN_SHARE
     split: float = SPLIT
     max_effects: int = MAX_EFFECTS
+    max_samples: int = MAX_SAMPLES
+    """Samples used at most of each recording (spans spread over a longer one)."""
 
 
 @dataclass(frozen=True)
@@ -72,6 +69,14 @@ class Segments:
     full: EquationData | None
     recs: dict[str, Recording]
     feedback: float = 0.0
+    parts: dict[str, tuple[Recording, ...]] = field(default_factory=dict)
+    """The contiguous parts of ``recs`` (one each, unless spans of a long recording)."""
+    used: dict[str, Any] = field(default_factory=dict)
+    """What part of the recordings was used (:meth:`.spans.Excerpt.describe`)."""
+
+    def pieces(self, name: str) -> tuple[Recording, ...]:
+        """The contiguous parts of segment ``name`` (``estimation``, ``validation``)."""
+        return self.parts.get(name) or (self.recs[name],)
 
     @property
     def closed_loop(self) -> bool:
@@ -85,29 +90,72 @@ def _filter_for(spec: FilterSpec, fs: float) -> FilterSpec:
                    edge=int(np.ceil(3.0 * fs / spec.cutoff_hz)))
 
 
-def segments(plant: Plant, real: Recording, validate: Recording | None,
-             split: float = SPLIT) -> Segments:
-    """Split (or pair) the recordings and build their equation-error data."""
-    for rec in (real, validate):
-        if rec is not None:
-            check_finite(rec)
-    if validate is None:
-        cut = int(split * len(real))
-        if cut < 10 or len(real) - cut < 10:
-            raise DiagnoseError(f"{len(real)} samples cannot be split for held-out data")
-        recs = {"estimation": real.window(0, cut), "validation": real.window(cut, len(real))}
+def _excerpt(rec: Recording | Excerpt, max_samples: int, split: float | None) -> Excerpt:
+    if isinstance(rec, Excerpt):
+        return rec
+    return excerpt_of(rec, plan_spans(len(rec), max_samples, split))
+
+
+def _split(ex: Excerpt, split: float) -> tuple[tuple[Recording, ...], tuple[Recording, ...]]:
+    """The parts of one recording before and after the cut of the whole recording (a part
+    across the cut -- the whole recording, when it is used whole -- is split there)."""
+    cut = int(split * ex.total)
+    if cut < 10 or ex.total - cut < 10:
+        raise DiagnoseError(f"{ex.total} samples cannot be split for held-out data")
+    before: list[Recording] = []
+    after: list[Recording] = []
+    for (a, b), part in zip(ex.ranges(), ex.parts, strict=True):
+        if b <= cut:
+            before.append(part)
+        elif a >= cut:
+            after.append(part)
+        else:
+            before.append(part.window(0, cut - a))
+            after.append(part.window(cut - a, b - a))
+    if not before or not after:
+        raise DiagnoseError(f"the spans of {ex.total} samples leave no held-out data")
+    return tuple(before), tuple(after)
+
+
+def _whole(parts: tuple[Recording, ...], ex: Excerpt, first: bool) -> Recording:
+    """The parts as one recording: a window of the excerpt's joined recording (no copy)."""
+    n = sum(len(p) for p in parts)
+    return ex.joined.window(0, n) if first else ex.joined.window(ex.used - n, ex.used)
+
+
+def segments(plant: Plant, real: Recording | Excerpt, validate: Recording | Excerpt | None,
+             split: float = SPLIT, max_samples: int = MAX_SAMPLES) -> Segments:
+    """Split (or pair) the recordings and build their equation-error data.
+
+    A recording longer than ``max_samples`` is used in spans spread over it
+    (:func:`..recording.spans.plan_spans`); an :class:`Excerpt` says which were read.
+    """
+    ex = _excerpt(real, max_samples, split if validate is None else None)
+    vex = None if validate is None else _excerpt(validate, max_samples, None)
+    for e in (ex, vex):
+        if e is not None:
+            check_finite(e.joined)
+    if vex is None:
+        before, after = _split(ex, split)
+        parts = {"estimation": before, "validation": after}
+        recs = {"estimation": _whole(before, ex, True), "validation": _whole(after, ex, False)}
+        used = {"recording": ex.describe(held_out=len(after) if not ex.whole else 0)}
     else:
-        recs = {"estimation": real, "validation": validate}
-    spec = choose_filter(recs["estimation"].speed, recs["estimation"].sample_rate_hz)
-    vspec = spec if recs["validation"].sample_rate_hz == recs["estimation"].sample_rate_hz \
-        else _filter_for(spec, recs["validation"].sample_rate_hz)
-    fb = feedback_z(recs["estimation"])
+        parts = {"estimation": ex.parts, "validation": vex.parts}
+        recs = {"estimation": ex.joined, "validation": vex.joined}
+        used = {"recording": ex.describe(), "validate_recording": vex.describe()}
+    est_parts = parts["estimation"]
+    fs = est_parts[0].sample_rate_hz
+    spec = choose_filter([p.speed for p in est_parts], fs)
+    vfs = recs["validation"].sample_rate_hz
+    vspec = spec if vfs == fs else _filter_for(spec, vfs)
+    fb = feedback_z(est_parts)
     closed = fb > FEEDBACK_Z
-    mode = kinematic_mode(recs["estimation"], spec, closed)
-    est = equation_data(plant, recs["estimation"], spec, mode, closed)
-    val = equation_data(plant, recs["validation"], vspec, mode, closed)
-    full = equation_data(plant, real, spec, mode, closed) if validate is None else None
-    return Segments(est, val, full, recs, fb)
+    mode = kinematic_mode(est_parts, spec, closed)
+    est = equation_data_parts(plant, est_parts, spec, mode, closed)
+    val = equation_data_parts(plant, parts["validation"], vspec, mode, closed)
+    full = equation_data_parts(plant, ex.parts, spec, mode, closed) if vex is None else None
+    return Segments(est, val, full, recs, fb, parts, used)
 
 
 @dataclass(frozen=True)

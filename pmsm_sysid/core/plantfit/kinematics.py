@@ -28,7 +28,9 @@ reason for the care below (the IDIM-LS practice of the EMPS benchmark):
 
 from __future__ import annotations
 
+import itertools
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,8 +40,10 @@ from scipy.signal import butter, sosfiltfilt
 from ..errors import DiagnoseError
 from ..physics.plant import SIGN_SMOOTHING_MPS, Plant
 from ..recording.signals import Recording
+from ..recording.spans import Parts, as_parts
 from .averaging import interval_effects, interval_force, interval_friction, sign_width
 from .calibration import SpeedPrior, calibrated_friction
+from .feedback import high_band
 from .instruments import instrumented
 
 FloatArray = NDArray[np.float64]
@@ -66,11 +70,16 @@ class FilterSpec:
                 "order": self.order, "kind": "butterworth zero-phase (sosfiltfilt)"}
 
 
-def choose_filter(speed: FloatArray, fs: float) -> FilterSpec:
-    """Cut-off from the speed's 99 % power bandwidth (module doc)."""
-    u = np.asarray(speed, dtype=np.float64) - float(np.mean(speed))
-    power = np.abs(np.fft.rfft(u)) ** 2
-    freqs = np.fft.rfftfreq(len(u), 1.0 / fs)
+def choose_filter(speed: FloatArray | Sequence[FloatArray], fs: float) -> FilterSpec:
+    """Cut-off from the speed's 99 % power bandwidth (module doc); for the speeds of several
+    parts, from their periodograms averaged (each part cut to the shortest)."""
+    pieces = [speed] if isinstance(speed, np.ndarray) else list(speed)
+    n = min(len(p) for p in pieces)
+    power = np.zeros(n // 2 + 1)
+    for piece in pieces:
+        u = np.asarray(piece[:n], dtype=np.float64) - float(np.mean(piece[:n]))
+        power += np.abs(np.fft.rfft(u)) ** 2
+    freqs = np.fft.rfftfreq(n, 1.0 / fs)
     total = float(power.sum())
     if total <= 0.0:
         raise DiagnoseError("the axis does not move: nothing to compare the plant with")
@@ -88,91 +97,18 @@ def choose_filter(speed: FloatArray, fs: float) -> FilterSpec:
     return FilterSpec(cutoff_hz=fc, band_hz=band, decimation=decim, edge=edge)
 
 
-FEEDBACK_Z = 4.0
-
-
-FEEDBACK_LAGS = 8
-
-
-def _past(sig: FloatArray, p: int) -> FloatArray:
-    """Columns sig[k-1], ..., sig[k-p] for k = p .. N-1."""
-    win = np.lib.stride_tricks.sliding_window_view(sig, p + 1)
-    out: FloatArray = win[:, :-1][:, ::-1]
-    return out
-
-
-def _innovation(sig: FloatArray, past: FloatArray) -> FloatArray:
-    """What of sig[k] the past does not predict (least squares, with a constant)."""
-    X = np.column_stack([np.ones(len(past)), past])
-    scale = np.maximum(np.linalg.norm(X, axis=0), 1e-300)
-    coef = np.linalg.lstsq(X / scale, sig, rcond=None)[0]
-    out: FloatArray = sig - (X / scale) @ coef
-    return out
-
-
-def feedback_z(rec: Recording) -> float:
-    """Evidence that the thrust is a feedback of the measurements (a z-score).
-
-    Under feedback the thrust at t_k answers the measurement taken at t_k, noise included
-    (a D-term to the speed noise, a P-term to the position noise); open loop it is set
-    without looking at it. Two views of that must agree (the smaller z is returned):
-
-    * the new part of the thrust (what its own past and the measurements' past, 8 samples,
-      do not predict) against the new part of the speed or position (sensor noise, process
-      force): open loop the motion answers the thrust a sample later, in the past of both,
-      so a held random input (PRBS, APRBS) is not taken for a loop -- but a noisy thrust
-      sensor in that past makes both predictions err together;
-    * the thrust against the speed or position above 0.3 fs, where a servo's motion has no
-      power: immune to thrust-sensor noise, but the speed's physical answer to the edges of
-      a held random input shows there too.
-
-    Above ``FEEDBACK_Z`` the recording is treated as closed loop.
-    """
-    p = FEEDBACK_LAGS
-    f = np.asarray(rec.thrust, dtype=np.float64)
-    sigs = [rec.position] if rec.speed_derived else [rec.speed, rec.position]
-    if len(f) < 10 * p:
-        return 0.0
-    best = 0.0
-    for sig in sigs:
-        s = np.asarray(sig, dtype=np.float64)
-        past = np.hstack([_past(f, p), _past(s, p)])
-        ef = _innovation(f[p:], past)
-        es = _innovation(s[p:], past)
-        den = float(np.std(ef) * np.std(es))
-        if den > 0:
-            rho = float(np.mean(ef * es)) / den
-            best = max(best, abs(rho) * math.sqrt(len(ef)))
-    return min(best, _high_band_z(rec))
-
-
-def _high_band_z(rec: Recording) -> float:
-    """|correlation|·sqrt(N) of the thrust with the speed or position above 0.3 fs."""
-    fs = rec.sample_rate_hz
-    hp = butter(4, 0.3 * fs, btype="highpass", fs=fs, output="sos")
-    f = sosfiltfilt(hp, rec.thrust)[20:-20]
-    best = 0.0
-    for sig in (rec.speed, rec.position):
-        z = sosfiltfilt(hp, sig)[20:-20]
-        den = float(np.std(f) * np.std(z))
-        if den > 0:
-            rho = float(np.mean((f - f.mean()) * (z - z.mean()))) / den
-            best = max(best, abs(rho) * math.sqrt(len(f)))
-    return best
-
-
 def _noise_gain(op: FloatArray, sos: FloatArray) -> float:
     """Norm of the filtered impulse response of a finite-difference operator."""
     return float(np.linalg.norm(sosfiltfilt(sos, op)))
 
 
-def _hf_sigma(sig: FloatArray, fs: float) -> float:
-    """White measurement noise of ``sig`` read above 0.3 fs (white fraction there: 0.4)."""
-    hp = butter(4, 0.3 * fs, btype="highpass", fs=fs, output="sos")
-    return float(np.std(sosfiltfilt(hp, sig)[20:-20])) / math.sqrt(0.4)
+def _hf_sigma(sigs: Sequence[FloatArray], fs: float) -> float:
+    """White measurement noise of a signal (its parts pooled) read above 0.3 fs (white
+    fraction there: 0.4)."""
+    return float(np.std(np.concatenate([high_band(s, fs) for s in sigs]))) / math.sqrt(0.4)
 
 
-def kinematic_mode(rec: Recording, spec: FilterSpec, closed_loop: bool = True) -> str:
+def kinematic_mode(rec: Parts, spec: FilterSpec, closed_loop: bool = True) -> str:
     """``position`` when the speed is derived, or under feedback when the acceleration is
     less noisy from the position than from the speed in the filter's band; else ``speed``.
 
@@ -183,32 +119,32 @@ def kinematic_mode(rec: Recording, spec: FilterSpec, closed_loop: bool = True) -
     :mod:`.instruments` remove that bias anyway, and the speed's pairing with the held
     thrust is exact (it tells a lag from a delay), so a measured speed is kept.
     """
-    if rec.speed_derived:
+    parts = as_parts(rec)
+    if parts[0].speed_derived:
         return "position"
     if not closed_loop:
         return "speed"
-    fs = rec.sample_rate_hz
+    fs = parts[0].sample_rate_hz
     sos = np.asarray(butter(spec.order, spec.cutoff_hz, fs=fs, output="sos"))
     imp = np.zeros(2049)
     imp[1024] = 1.0
     d1 = fs * (imp[1:] - imp[:-1])
     d2 = fs * fs * (imp[2:] - 2.0 * imp[1:-1] + imp[:-2])
-    from_speed = _hf_sigma(rec.speed, fs) * _noise_gain(d1, sos)
-    from_position = _hf_sigma(rec.position, fs) * _noise_gain(d2, sos)
+    from_speed = _hf_sigma([r.speed for r in parts], fs) * _noise_gain(d1, sos)
+    from_position = _hf_sigma([r.position for r in parts], fs) * _noise_gain(d2, sos)
     return "position" if from_position < from_speed else "speed"
 
 
-def smoothed_speed_noise(rec: Recording, mode: str, sos: FloatArray) -> float:
+def smoothed_speed_noise(rec: Parts, mode: str, sos: FloatArray) -> float:
     """Standard deviation (m/s) of the measurement noise left in the smoothed speed.
 
     The raw noise is read above 0.3 fs, where a servo's motion has no power (the white-noise
     fraction there is 0.4), and carried through the exact linear operations that make the
     smoothed speed (interval mean or central difference, then the filter L).
     """
-    fs = rec.sample_rate_hz
-    raw = rec.speed if mode == "speed" else rec.position
-    hp = butter(4, 0.3 * fs, btype="highpass", fs=fs, output="sos")
-    sigma = float(np.std(sosfiltfilt(hp, raw)[20:-20])) / math.sqrt(0.4)
+    parts = as_parts(rec)
+    fs = parts[0].sample_rate_hz
+    sigma = _hf_sigma([r.speed if mode == "speed" else r.position for r in parts], fs)
     imp = np.zeros(2049)
     imp[1024] = 1.0
     op = 0.5 * (imp[1:] + imp[:-1]) if mode == "speed" else 0.5 * fs * (imp[2:] - imp[:-2])
@@ -227,6 +163,11 @@ class EquationData:
     instant. ``y`` is the
     filtered, trimmed and decimated residual; ``project`` maps any full-rate column the same
     way, so regressors and residual stay consistent.
+
+    ``parts``: the data of several contiguous recordings (spans of a long one) end to end,
+    with the number of recorded samples of each; every filtering, pairing and trimming is
+    then done within each part, so the result is the parts' own data, concatenated
+    (:func:`.parts.joined`). Empty: one contiguous recording.
     """
 
     x: FloatArray
@@ -249,10 +190,31 @@ class EquationData:
     speed_noise_mps: float = 0.0
     sign_smoothing_mps: float = SIGN_SMOOTHING_MPS
     prior: SpeedPrior | None = None
+    parts: tuple[int, ...] = ()
 
     @property
     def n(self) -> int:
         return len(self.y)
+
+    def _bounds(self, offset: int) -> list[tuple[int, int]]:
+        """(start, stop) of each part in arrays with ``offset`` fewer entries per part than
+        recorded samples (0: per interval, 1 or 2: per equation instant)."""
+        sizes = self.parts or (len(self.cmd),)
+        edges = np.cumsum([0, *(k - offset for k in sizes)])
+        return [(int(a), int(b)) for a, b in itertools.pairwise(edges)]
+
+    def instants(self) -> list[tuple[int, int]]:
+        """(start, stop) of each part in the full-rate arrays (one per equation instant)."""
+        return self._bounds(1 if self.mode == "speed" else 2)
+
+    def per_interval(self, fn: Callable[[FloatArray], FloatArray],
+                     q: FloatArray) -> FloatArray:
+        """``fn`` applied to each part of a per-interval array, the results concatenated."""
+        arr = np.asarray(q, dtype=np.float64)
+        if not self.parts:
+            return fn(arr)
+        out: FloatArray = np.concatenate([fn(arr[a:b]) for a, b in self._bounds(0)])
+        return out
 
     @property
     def sample_rate_hz(self) -> float:
@@ -262,18 +224,23 @@ class EquationData:
     def project(self, col: FloatArray) -> FloatArray:
         """L-filter, trim and decimate a full-rate column (or the columns of a 2-D array)."""
         arr = np.asarray(col, dtype=np.float64)
-        f = sosfiltfilt(self.sos, arr, axis=0)
         e, d = self.filt.edge, self.filt.decimation
-        out: FloatArray = np.ascontiguousarray(f[e:len(f) - e:d])
-        return out
+        if not self.parts:
+            f = sosfiltfilt(self.sos, arr, axis=0)
+            out: FloatArray = np.ascontiguousarray(f[e:len(f) - e:d])
+            return out
+        pieces = [sosfiltfilt(self.sos, arr[a:b], axis=0) for a, b in self.instants()]
+        return np.ascontiguousarray(np.concatenate([f[e:len(f) - e:d] for f in pieces]))
 
     def pair(self, per_interval: FloatArray) -> FloatArray:
         """Map a per-interval quantity (mean over [t_k, t_k+1)) to the equation instants."""
-        q = np.asarray(per_interval, dtype=np.float64)
-        if self.mode == "speed":
-            return q[:-1]
-        out: FloatArray = 0.5 * (q[:-2] + q[1:-1])
-        return out
+        def one(q: FloatArray) -> FloatArray:
+            if self.mode == "speed":
+                return q[:-1]
+            out: FloatArray = 0.5 * (q[:-2] + q[1:-1])
+            return out
+
+        return self.per_interval(one, per_interval)
 
     def friction(self, stribeck_mps: float = 0.0) -> FloatArray:
         """Interval means of sign(v) (or the Stribeck hump) given the smoothed speed:
@@ -287,7 +254,8 @@ class EquationData:
 
     def forced(self, tau: float = 0.0, delay: float = 0.0) -> FloatArray:
         """Applied force at the equation instants for a lag/delay on the command."""
-        return self.pair(interval_force(self.cmd, self.period, tau, delay))
+        return self.pair(self.per_interval(
+            lambda c: interval_force(c, self.period, tau, delay), self.cmd))
 
 
 def _nominal_dynamics(plant: Plant, rec: Recording, mode: str) -> tuple[FloatArray, ...]:
@@ -322,11 +290,14 @@ def _interval_ends(rec: Recording, mode: str, sos: FloatArray) -> tuple[FloatArr
 
 
 def equation_data(plant: Plant, rec: Recording, filt: FilterSpec | None = None,
-                  mode: str | None = None, closed_loop: bool = False) -> EquationData:
+                  mode: str | None = None, closed_loop: bool = False,
+                  speed: tuple[float, SpeedPrior] | None = None) -> EquationData:
     """Build the residual of ``plant`` on ``rec`` (effects already in the plant included).
 
     ``closed_loop``: the thrust is a feedback of the measurements, so the mass and viscous
     instruments are built from the thrust one filter memory (``edge`` samples) earlier.
+    ``speed``: the smoothed speed's noise and prior when ``rec`` is one part of the data
+    (they are the whole data's, :func:`.parts.equation_data_parts`); default: ``rec``'s.
     """
     fs = rec.sample_rate_hz  # the data's rate; the plant's own rate plays no part here
     mode = mode or ("position" if rec.speed_derived else "speed")
@@ -346,8 +317,11 @@ def equation_data(plant: Plant, rec: Recording, filt: FilterSpec | None = None,
     force = ifor[:-1] if mode == "speed" else 0.5 * (ifor[:-2] + ifor[1:-1])
     xs, vs, as_ = (sosfiltfilt(sos, s) for s in (x, v, a))
     v_lo, v_hi = _interval_ends(rec, mode, sos)
-    noise = smoothed_speed_noise(rec, mode, sos)
-    prior = SpeedPrior.from_speeds(np.concatenate([v_lo, v_hi]), noise, SIGN_SMOOTHING_MPS)
+    if speed is None:
+        noise = smoothed_speed_noise(rec, mode, sos)
+        prior = SpeedPrior.from_speeds(np.concatenate([v_lo, v_hi]), noise, SIGN_SMOOTHING_MPS)
+    else:
+        noise, prior = speed
     resid = force - inertial - interval_effects(plant, xs, vs, v_lo, v_hi, force, T, mode,
                                                 prior)
     t = rec.t[:-1] if mode == "speed" else rec.t[1:-1]
@@ -365,13 +339,22 @@ def equation_data(plant: Plant, rec: Recording, filt: FilterSpec | None = None,
 
 def thinned_times(data: EquationData) -> FloatArray:
     """Time stamps of the regression samples (trimmed and decimated like ``y``)."""
+    return thinned(data, data.t)
+
+
+def thinned_sizes(data: EquationData) -> tuple[int, ...]:
+    """Regression samples of each part (empty for one contiguous recording)."""
+    if not data.parts:
+        return ()
     e, d = data.filt.edge, data.filt.decimation
-    out: FloatArray = data.t[e:len(data.t) - e:d]
-    return out
+    return tuple(len(range(lo + e, hi - e, d)) for lo, hi in data.instants())
 
 
 def thinned(data: EquationData, arr: FloatArray) -> FloatArray:
     """Trim and decimate a full-rate array without filtering (states for plots, bins)."""
     e, d = data.filt.edge, data.filt.decimation
-    out: FloatArray = np.asarray(arr)[e:len(arr) - e:d]
-    return out
+    if not data.parts:
+        out: FloatArray = np.asarray(arr)[e:len(arr) - e:d]
+        return out
+    a = np.asarray(arr)
+    return np.concatenate([a[lo + e:hi - e:d] for lo, hi in data.instants()])

@@ -1,11 +1,13 @@
-"""Recordings of one drive axis: sampled thrust, speed and position, and the stamp
-alignment that turns three input streams into one recording (first stage of the data flow).
+"""Recordings of one drive axis: sampled thrust, speed and position, the stamp alignment
+that turns three input streams into one recording (first stage of the data flow), and the
+spans of a long recording that the fitting stages use (:mod:`.spans`).
 """
 
 from .align import AlignReport, align_streams
 from .signals import Recording, SpeedDeriver, check_finite, derive_speed, estimate_sample_rate
+from .spans import MAX_SAMPLES, Excerpt, excerpt_of, plan_spans
 
 __all__ = [
-    "AlignReport", "Recording", "SpeedDeriver", "align_streams", "check_finite",
-    "derive_speed", "estimate_sample_rate"
+    "MAX_SAMPLES", "AlignReport", "Excerpt", "Recording", "SpeedDeriver", "align_streams",
+    "check_finite", "derive_speed", "estimate_sample_rate", "excerpt_of", "plan_spans"
 ]
