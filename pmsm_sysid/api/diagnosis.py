@@ -10,6 +10,7 @@ from ..core.discrepancy.result import DiagnoseResult
 from ..core.errors import OptionError
 from ..core.physics.plant import Plant
 from ..core.recording.signals import Recording
+from ..core.recording.spans import MAX_SAMPLES, MIN_SPAN, SPANS, Excerpt, excerpt_of, plan_spans
 from . import _checks
 from ._json import plain
 from .simulation import PlantLike, resolve_plant
@@ -34,9 +35,12 @@ class Diagnosis:
     result: DiagnoseResult
     """Found effects, their estimates, the fit before and after, where the mismatch lives."""
     real: Recording
-    """The real recording that was diagnosed."""
+    """The part of the real recording that was diagnosed: all of it, or the spans of a
+    recording longer than ``max_samples`` end to end (see :attr:`excerpt`)."""
     sources: dict[str, str] = field(default_factory=dict)
     """``plant_file``, ``real``, ``validate``: the files given (paths only)."""
+    excerpt: Excerpt | None = None
+    """Which samples of the real recording were used (``total``, ``ranges()``)."""
 
     @property
     def corrected(self) -> Plant:
@@ -67,11 +71,28 @@ def _recording(data: RecordingLike, label: str, namespace: str | None,
     raise OptionError(f"{label} must be a Recording or a bag path, got {type(data).__name__}")
 
 
+def _excerpt(data: RecordingLike, label: str, namespace: str | None, max_samples: int,
+             split: float | None, joint: str | None = None) -> Excerpt:
+    """The spans of ``data`` the diagnosis uses (all of it within ``max_samples``); of a bag
+    only those spans are read."""
+    if isinstance(data, Recording):
+        return excerpt_of(data, plan_spans(len(data), max_samples, split))
+    if isinstance(data, (str, os.PathLike)):
+        from .recordings import load_excerpt
+
+        if joint is not None:
+            rec = _recording(data, label, namespace, joint)
+            return excerpt_of(rec, plan_spans(len(rec), max_samples, split))
+
+        return load_excerpt(data, namespace, max_samples=max_samples, split=split)
+    raise OptionError(f"{label} must be a Recording or a bag path, got {type(data).__name__}")
+
+
 def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike | None = None,
              namespace: str | None = None, alpha: float = 1e-3, min_share: float = 0.01,
              replay: bool = True, gfrf: bool = True, sim: RecordingLike | None = None,
              sim_namespace: str | None = None, joint: str | None = None,
-             sim_joint: str | None = None) -> Diagnosis:
+             sim_joint: str | None = None, max_samples: int = MAX_SAMPLES) -> Diagnosis:
     """Name the physics a plant model leaves out, by comparing it with a real recording.
 
     Locates the mismatch (equation error of the inverse dynamics over time, position,
@@ -86,7 +107,9 @@ def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike |
     Options as ``pmsm-sysid diagnose``: ``alpha`` (family-wise false-alarm level of each
     selection step), ``min_share`` (smallest share of the mismatch an effect must explain),
     ``replay`` (short-horizon speed replay), ``gfrf`` (GFRF comparison with a noisy
-    simulated twin).
+    simulated twin), ``max_samples`` (samples used at most of each recording: a longer one
+    is used in ten spans spread evenly over it, of a bag only those are read; the result's
+    ``method.data_used`` and summary say which).
 
     ``sim``: instead of a plant, a recording of the user's own simulator (Gazebo, Isaac
     Sim, MuJoCo, Simulink, ...; a :class:`Recording` or a bag path, read with
@@ -117,17 +140,28 @@ def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike |
 
     options = DiagnoseOptions(alpha=_checks.fraction("alpha", alpha),
                               min_share=_checks.fraction("min_share", min_share),
-                              replay=bool(replay), gfrf=bool(gfrf))
+                              replay=bool(replay), gfrf=bool(gfrf),
+                              max_samples=_checks.count("max_samples", max_samples,
+                                                        SPANS * MIN_SPAN))
     if sim is not None and plant is not None:
         raise OptionError("give either a plant or a recording of the simulator (sim=), "
                           "not both")
     if sim is None:
         model, label = resolve_plant(plant)
-    rec = _recording(real, "real", namespace, joint)
-    held = None if validate is None else _recording(validate, "validate", namespace, joint)
+    split = options.split if validate is None else None
+    if sim is None:
+        rec = _excerpt(real, "real", namespace, options.max_samples, split, joint)
+        held = None if validate is None else _excerpt(validate, "validate", namespace,
+                                                      options.max_samples, None, joint)
+    else:  # the plants of both recordings are fitted from the whole recordings
+        rec = excerpt_of(_recording(real, "real", namespace, joint))
+        held = None if validate is None else excerpt_of(_recording(validate, "validate",
+                                                                   namespace, joint))
     sim_rec = None if sim is None else _recording(sim, "sim", sim_namespace, sim_joint)
-    _check_recordings((("real", real, rec), ("validate", validate, held), ("sim", sim, sim_rec)),
-                      identify=sim is not None)
+    _check_recordings((("real", real, rec), ("validate", validate, held)), identify=False)
+    if sim_rec is not None:
+        _check_recordings((("sim", sim, excerpt_of(sim_rec)), ("real", real, rec),
+                           ("validate", validate, held)), identify=True)
     sources = {}
     if sim is None and plant is not None and not isinstance(plant, Plant):
         sources["plant_file"] = label
@@ -135,23 +169,26 @@ def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike |
         if isinstance(value, (str, os.PathLike)):
             sources[key] = str(value)
     if sim_rec is not None:
-        return Diagnosis(diagnose_sim(sim_rec, rec, held, options), rec, sources)
-    return Diagnosis(run_diagnosis(model, rec, held, options), rec, sources)
+        return Diagnosis(diagnose_sim(sim_rec, rec.joined, None if held is None
+                                      else held.joined, options), rec.joined, sources, rec)
+    return Diagnosis(run_diagnosis(model, rec, held, options), rec.joined, sources, rec)
 
 
-def _check_recordings(items: tuple[tuple[str, Any, Recording | None], ...],
+def _check_recordings(items: tuple[tuple[str, Any, Excerpt | None], ...],
                       identify: bool) -> None:
-    """One sampling grid per recording (derivatives, filters and replays assume it); with
-    a simulator's recording, each must also be able to identify a plant."""
+    """One sampling grid per recording (derivatives, filters and replays assume it: within
+    each span used -- the gaps between spans are the spans' choice); with a simulator's
+    recording, each must also be able to identify a plant."""
     from ..core.plantfit.physical import check_identifiable
     from ..core.selection.datacheck import check_sampling
 
-    for name, given, r in items:
-        if r is None:
+    for name, given, ex in items:
+        if ex is None:
             continue
         where = given if isinstance(given, (str, os.PathLike)) else name
         label = {"sim": "simulated recording", "validate": "held-out recording"}.get(
             name, "recording")
-        check_sampling(r.t, r.sample_rate_hz, f"{label} {where}")
+        for part in ex.parts:
+            check_sampling(part.t, part.sample_rate_hz, f"{label} {where}")
         if identify:
-            check_identifiable(r, f"{label} {where}")
+            check_identifiable(ex.joined, f"{label} {where}")

@@ -12,6 +12,7 @@ from ..core.recording.signals import Recording
 
 if TYPE_CHECKING:
     from ..bagio import LoadedRecording
+    from ..core.recording.spans import Excerpt
 
 PathLike = str | os.PathLike[str]
 STORAGES = ("mcap", "sqlite3")
@@ -30,6 +31,18 @@ def load_bag(path: PathLike, namespace: str | None = None,
         raise OptionError(f"joint must be a joint name, got {joint!r}")
     return read_recording(Path(path), namespace=namespace, until_sample=until_sample,
                           joint_name=joint)
+
+
+def load_excerpt(path: PathLike, namespace: str | None = None, *, max_samples: int,
+                 split: float | None = None) -> Excerpt:
+    """The spans of a bag that a fit within ``max_samples`` uses (all of it when it fits),
+    read without reading the rest (:func:`pmsm_sysid.bagio.spans.read_excerpt`)."""
+    from ..bagio.spans import read_excerpt
+    from ..validate import check_namespace
+
+    if namespace is not None:
+        check_namespace(namespace, "namespace")
+    return read_excerpt(Path(path), namespace=namespace, max_samples=max_samples, split=split)
 
 
 def read_bag(path: PathLike, namespace: str | None = None, *,

@@ -112,20 +112,28 @@ _VALUE: dict[str, Callable[[Any], float]] = {
 }
 
 
-def _read_triple(reader: Any, chosen: dict[str, str],
-                 until: int | None) -> tuple[dict[str, _Stream], bool]:
+#: (log-time start, log-time stop, header-stamp lo, header-stamp hi) in ns, any None: one
+#: span of a long recording (messages outside it are skipped, not held).
+Window = tuple[int | None, int | None, int, int]
+
+
+def _read_triple(reader: Any, chosen: dict[str, str], until: int | None,
+                 window: Window | None = None) -> tuple[dict[str, _Stream], bool]:
     store = typestore()
     by_topic = {topic: signal for signal, topic in chosen.items()}
     streams: dict[str, _Stream] = {s: _stream() for s in chosen}
     conns = [c for c in reader.connections if c.topic in by_topic]
     # the fast path only for the stock definitions (same type hash as ROS 2 Jazzy, or none)
     fast = {c.id for c in conns if c.digest in ("", store.hash_rihs01(c.msgtype))}
-    for conn, _, data in reader.messages(connections=conns):
+    start, stop, lo, hi = window or (None, None, 0, 2**63 - 1)
+    for conn, _, data in reader.messages(connections=conns, start=start, stop=stop):
         stamps, values = streams[by_topic[conn.topic]]
         got = decode_stamped(data) if conn.id in fast else None
         if got is None:
             msg = store.deserialize_cdr(data, conn.msgtype)
             got = _stamp_ns(msg), _VALUE[conn.msgtype](msg)
+        if not lo <= got[0] < hi:
+            continue
         stamps.append(got[0])
         values.append(got[1])
         if len(stamps) % 256 == 0 and _enough(streams, until):
@@ -141,7 +149,8 @@ def _joint_index(names: list[str], joint_name: str | None, seen: set[str]) -> in
 
 
 def _read_joint(path: Path, reader: Any, topic: str, joint_name: str | None,
-                until: int | None) -> tuple[dict[str, _Stream], bool]:
+                until: int | None, window: Window | None = None,
+                ) -> tuple[dict[str, _Stream], bool]:
     """JointState layout: effort = thrust, velocity = speed, position = position."""
     store = typestore()
     streams: dict[str, _Stream] = {s: _stream() for s in SIGNALS}
@@ -149,12 +158,13 @@ def _read_joint(path: Path, reader: Any, topic: str, joint_name: str | None,
     seen: set[str] = set()
     conns = [c for c in reader.connections if c.topic == topic]
     stopped = False
-    for conn, _, data in reader.messages(connections=conns):
+    start, stop, lo, hi = window or (None, None, 0, 2**63 - 1)
+    for conn, _, data in reader.messages(connections=conns, start=start, stop=stop):
         msg: Any = store.deserialize_cdr(data, conn.msgtype)
         k = _joint_index(list(msg.name), joint_name, seen)
-        if k is None:
-            continue
         stamp = _stamp_ns(msg)
+        if k is None or not lo <= stamp < hi:
+            continue
         for signal, field in fields.items():
             arr = getattr(msg, field)
             if len(arr) > k:
@@ -245,6 +255,7 @@ def read_recording(
     tolerance_s: float | None = None,
     joint_name: str | None = None,
     until_sample: int | None = None,
+    window: Window | None = None,
 ) -> LoadedRecording:
     """Read and align the input signals of a bag (``header.stamp``, not receive time).
 
@@ -256,6 +267,10 @@ def read_recording(
     :data:`READ_MARGIN` messages per stream after it, so a short window early in a long
     recording costs what the window costs, not what the recording does (``complete`` is
     then False and the alignment counts cover the part read).
+
+    ``window``: read only the messages logged within its log times (either may be None)
+    whose ``header.stamp`` lies within its stamps: one span of a long recording
+    (:mod:`.spans`).
     """
     path = Path(path)
     with open_reader(path) as reader:
@@ -263,13 +278,13 @@ def read_recording(
         layout = _choose_layout(path, found, namespace)
         if "joint_state" in layout:
             streams, stopped = _read_joint(path, reader, layout["joint_state"], joint_name,
-                                           until_sample)
+                                           until_sample, window)
             used = {layout["joint_state"]: tp.JOINT_STATE_TYPE}
         else:
             if joint_name is not None:
                 raise BagError(f"{path}: a joint was named ('{joint_name}') but the inputs are "
                                f"{', '.join(layout.values())}, not a JointState topic")
-            streams, stopped = _read_triple(reader, layout, until_sample)
+            streams, stopped = _read_triple(reader, layout, until_sample, window)
             used = {topic: found[topic] for topic in layout.values()}
             empty = [layout[s] for s in (tp.THRUST, tp.POSITION) if not streams[s][0]]
             if empty:

@@ -32,6 +32,18 @@ OUTPUTS = {"json": "file", "corrected_plant": "file", "report": "report"}
 
 
 
+def _budget(text: str) -> int:
+    """--max-samples: a whole number, at least ten spans of the shortest span."""
+    from ..core.errors import DataError
+    from ..core.recording.spans import check_budget
+
+    try:
+        return check_budget(int(text))
+    except (ValueError, DataError) as exc:
+        raise argparse.ArgumentTypeError(str(exc).replace("max_samples", "--max-samples")) \
+            from exc
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     ref = p.add_mutually_exclusive_group(required=True)
     ref.add_argument("--plant", metavar="PLANT.yaml", help="the simulation's plant file")
@@ -57,6 +69,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="smallest share of the mismatch an effect must explain (default 0.01)")
     p.add_argument("--no-replay", action="store_true",
                    help="skip the short-horizon speed replay (output error)")
+    p.add_argument("--max-samples", type=_budget, default=None, metavar="N",
+                   help="samples used at most of each recording (default 120000); a longer "
+                        "one is used in ten spans spread evenly over it, and only those are "
+                        "read")
     p.add_argument("--no-gfrf", action="store_true",
                    help="skip the GFRF comparison of the real data's NARX with a noisy "
                         "simulated twin's")
@@ -74,17 +90,20 @@ def run(args: argparse.Namespace) -> int:
     from ..api import diagnose
     from ..progress import activity
 
+    budget = {} if args.max_samples is None else {"max_samples": args.max_samples}
     with activity("diagnose"):
         found = diagnose(args.plant, args.real, validate=args.validate,
                          namespace=args.namespace, alpha=args.alpha, min_share=args.min_share,
                          replay=not args.no_replay, gfrf=not args.no_gfrf, sim=args.sim,
                          sim_namespace=args.sim_namespace, joint=args.joint,
-                         sim_joint=args.sim_joint)
+                         sim_joint=args.sim_joint, **budget)
     real = found.real
+    total = found.excerpt.total if found.excerpt is not None else len(real)
+    used = "" if total == len(real) else f", {len(real)} used: see 'data used'"
     out = sys.stderr if args.json == "-" else sys.stdout
     what = f"plant {args.plant}" if args.sim is None else f"simulator's recording {args.sim}"
     print(f"diagnose: {what} vs recording {args.real} "
-          f"({len(real)} samples at {real.sample_rate_hz:g} Hz"
+          f"({total} samples at {real.sample_rate_hz:g} Hz{used}"
           f"{', speed derived from position' if real.speed_derived else ''})", file=out)
     print(found.summary(), file=out)
     write_json(found.to_dict(), args.json)

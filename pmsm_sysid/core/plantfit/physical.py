@@ -46,16 +46,15 @@ from ..errors import DataError, InsufficientExcitationError, PlantError, PmsmSys
 from ..physics.plant import Plant
 from ..recording.signals import Recording, check_finite
 from .estimate import Fit, design, refine
+from .feedback import FEEDBACK_Z, feedback_z
 from .fit import EffectsFit, FitOptions, Segments, fit_effects, segments
 from .found import FoundEffect
 from .kinematics import (
-    FEEDBACK_Z,
     MIN_SAMPLES,
     EquationData,
     FilterSpec,
     choose_filter,
     equation_data,
-    feedback_z,
     kinematic_mode,
 )
 from .library import Effect
