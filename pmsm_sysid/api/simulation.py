@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -41,12 +41,36 @@ class SimulationRun:
     source: ExcitationSource
 
 
-def simulation_run(plant: PlantLike = None, *, excitation: str = "paper-speed",
-                   duration: float = 10.0, seed: int = 0, amplitude: float | None = None,
-                   excitation_options: Mapping[str, Any] | None = None) -> SimulationRun:
-    """:func:`simulate`, keeping the plant and the excitation source."""
-    from ..core.physics.motor import simulate as integrate
+@dataclass(frozen=True)
+class SimulationPlan:
+    """A checked simulation not run yet: :meth:`blocks` runs it a block at a time."""
 
+    plant: Plant
+    plant_label: str
+    source: ExcitationSource
+    samples: int
+    seed: int
+
+    def meta(self, rec: Recording) -> dict[str, str]:
+        """The recording's metadata: the simulator's plus the excitation and plant file."""
+        return {**rec.meta, "excitation": self.source.kind,
+                "excitation_amplitude_n": repr(self.source.amplitude_n),
+                "excitation_options": json.dumps(self.source.options, sort_keys=True),
+                "plant_file": self.plant_label}
+
+    def blocks(self, block: int | None = None) -> Iterator[Recording]:
+        """The recording in consecutive blocks (the numbers of :func:`simulate`)."""
+        from ..core.physics.motor import BLOCK, simulate_blocks
+
+        for rec in simulate_blocks(self.plant, self.source.block, self.samples, self.seed,
+                                   block or BLOCK):
+            yield replace(rec, meta=self.meta(rec))
+
+
+def simulation_plan(plant: PlantLike = None, *, excitation: str = "paper-speed",
+                    duration: float = 10.0, seed: int = 0, amplitude: float | None = None,
+                    excitation_options: Mapping[str, Any] | None = None) -> SimulationPlan:
+    """The options of :func:`simulate`, checked, and what they will run."""
     _checks.choice("excitation", excitation, EXCITATIONS)
     seconds = _checks.positive("duration", duration)
     check_seed(seed, "seed")
@@ -58,15 +82,20 @@ def simulation_run(plant: PlantLike = None, *, excitation: str = "paper-speed",
     n = max(2, round(seconds * fs))
     source = ExcitationSource(excitation, fs, seed=seed, amplitude_n=amplitude,
                               **dict(excitation_options or {}))
-    rec = integrate(model, source.block(0, n), seed=seed)
-    meta = {
-        **rec.meta,
-        "excitation": excitation,
-        "excitation_amplitude_n": repr(source.amplitude_n),
-        "excitation_options": json.dumps(source.options, sort_keys=True),
-        "plant_file": label,
-    }
-    return SimulationRun(replace(rec, meta=meta), model, label, source)
+    return SimulationPlan(model, label, source, n, seed)
+
+
+def simulation_run(plant: PlantLike = None, *, excitation: str = "paper-speed",
+                   duration: float = 10.0, seed: int = 0, amplitude: float | None = None,
+                   excitation_options: Mapping[str, Any] | None = None) -> SimulationRun:
+    """:func:`simulate`, keeping the plant and the excitation source."""
+    from ..core.physics.motor import simulate as integrate
+
+    plan = simulation_plan(plant, excitation=excitation, duration=duration, seed=seed,
+                           amplitude=amplitude, excitation_options=excitation_options)
+    rec = integrate(plan.plant, plan.source.block(0, plan.samples), seed=seed)
+    return SimulationRun(replace(rec, meta=plan.meta(rec)), plan.plant, plan.plant_label,
+                         plan.source)
 
 
 def simulate(plant: PlantLike = None, *, excitation: str = "paper-speed",

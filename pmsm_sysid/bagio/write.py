@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +44,79 @@ def _custom_data(rec: Recording, extra: Mapping[str, str] | None) -> dict[str, s
     return data
 
 
+#: Samples converted to Python numbers at a time while writing (bounded extra memory).
+WRITE_BLOCK = 1 << 16
+
+
+class RecordingWriter:
+    """The three input topics of a recording, written a block of samples at a time."""
+
+    def __init__(self, writer: Writer, conns: list[tuple[Any, str, str]]) -> None:
+        self._writer = writer
+        self._conns = conns  # (connection, msgtype, signal name or extra topic name)
+
+    def write(self, rec: Recording, extra_points: Mapping[str, FloatArray] | None = None,
+              ) -> None:
+        """Append ``rec``'s samples (and the extra topics' values for them)."""
+        ns = _stamps_ns(rec.t)
+        extra = extra_points or {}
+        for name, values in extra.items():
+            if len(values) != len(ns):
+                raise BagError(f"extra topic '{name}' has {len(values)} values, "
+                               f"recording {len(ns)}")
+        arrays = [extra[name] if name in extra else rec.signal(name)
+                  for _, _, name in self._conns]
+        for start in range(0, len(ns), WRITE_BLOCK):
+            stop = start + WRITE_BLOCK
+            columns = [(conn, msgtype, np.asarray(values[start:stop], dtype=np.float64).tolist())
+                       for (conn, msgtype, _), values in zip(self._conns, arrays, strict=True)]
+            for k, stamp in enumerate(ns[start:stop].tolist()):
+                for conn, msgtype, values in columns:
+                    self._writer.write(conn, stamp,
+                                       encode_stamped(msgtype, stamp, FRAME_ID, values[k]))
+
+
+@contextmanager
+def recording_writer(
+    path: str | Path,
+    like: Recording,
+    *,
+    namespace: str = tp.DEFAULT_NAMESPACE,
+    storage: str = "mcap",
+    extra_topics: Sequence[str] = (),
+    custom_data: Mapping[str, str] | None = None,
+) -> Iterator[RecordingWriter]:
+    """A bag at ``path`` for recordings like ``like`` (its rate, metadata, speed topic or
+    not), written block by block with :meth:`RecordingWriter.write`."""
+    path = Path(path)
+    if path.exists():
+        raise BagError(f"{path} exists already, not overwriting")
+    plugin = storage_plugin(storage)
+    signals: list[tuple[str, str, str]] = []  # topic, type, signal or extra name
+    for name in ("thrust", "speed", "position"):
+        if name == "speed" and like.speed_derived:
+            continue
+        signals.append((tp.input_topic(namespace, name), tp.INPUT_TYPES[name], name))
+    signals += [(tp.input_topic(namespace, name), tp.POSITION_TYPE, name)
+                for name in extra_topics]
+    try:
+        with Writer(path, version=9, storage_plugin=plugin) as writer:
+            conns = []
+            for topic, msgtype, name in signals:
+                msgdef, digest = connection_args(msgtype)
+                conns.append((writer.add_connection(topic, msgtype, msgdef=msgdef,
+                                                    rihs01=digest,
+                                                    offered_qos_profiles=[DEFAULT_QOS]),
+                              msgtype, name))
+            for key, value in _custom_data(like, custom_data).items():
+                writer.set_custom_data(key, value)
+            yield RecordingWriter(writer, conns)
+    except PmsmSysidError:
+        raise
+    except Exception as exc:
+        raise BagError(f"{path}: cannot write bag ({type(exc).__name__}: {exc})") from exc
+
+
 def write_recording(
     path: str | Path,
     rec: Recording,
@@ -57,38 +131,16 @@ def write_recording(
     Receive time = stamp. A recording whose speed is derived gets no speed topic (readers
     derive it again; the bag's ``custom_data`` says so). ``extra_points`` adds one
     ``PointStamped`` topic ``<namespace>/<name>`` per entry (same stamps, e.g. a reference
-    position). Refuses to overwrite an existing path.
+    position). Refuses to overwrite an existing path. Samples are converted
+    ``WRITE_BLOCK`` at a time: the memory beyond ``rec`` stays bounded.
     """
-    path = Path(path)
-    if path.exists():
+    extra = dict(extra_points or {})
+    if Path(path).exists():
         raise BagError(f"{path} exists already, not overwriting")
-    plugin = storage_plugin(storage)
-    ns = _stamps_ns(rec.t)
-    signals: list[tuple[str, str, FloatArray]] = []  # topic, type, values
-    for name in ("thrust", "speed", "position"):
-        if name == "speed" and rec.speed_derived:
-            continue
-        signals.append((tp.input_topic(namespace, name), tp.INPUT_TYPES[name], rec.signal(name)))
-    for name, values in (extra_points or {}).items():
-        if len(values) != len(ns):
-            raise BagError(f"extra topic '{name}' has {len(values)} values, recording {len(ns)}")
-        signals.append((tp.input_topic(namespace, name), tp.POSITION_TYPE,
-                        np.asarray(values, dtype=np.float64)))
-    try:
-        with Writer(path, version=9, storage_plugin=plugin) as writer:
-            conns = []
-            for topic, msgtype, _ in signals:
-                msgdef, digest = connection_args(msgtype)
-                conns.append(writer.add_connection(topic, msgtype, msgdef=msgdef, rihs01=digest,
-                                                   offered_qos_profiles=[DEFAULT_QOS]))
-            for key, value in _custom_data(rec, custom_data).items():
-                writer.set_custom_data(key, value)
-            columns = [(conn, msgtype, values.tolist())
-                       for conn, (_, msgtype, values) in zip(conns, signals, strict=True)]
-            for k, stamp in enumerate(ns.tolist()):
-                for conn, msgtype, values in columns:
-                    writer.write(conn, stamp, encode_stamped(msgtype, stamp, FRAME_ID, values[k]))
-    except PmsmSysidError:
-        raise
-    except Exception as exc:
-        raise BagError(f"{path}: cannot write bag ({type(exc).__name__}: {exc})") from exc
+    _stamps_ns(rec.t)  # refuse bad input before creating anything
+    for name, values in extra.items():
+        if len(values) != len(rec):
+            raise BagError(f"extra topic '{name}' has {len(values)} values, recording {len(rec)}")
+    with recording_writer(path, rec, namespace=namespace, storage=storage,
+                          extra_topics=tuple(extra), custom_data=custom_data) as out:
+        out.write(rec, extra)

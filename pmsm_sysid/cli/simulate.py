@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .common import MAX_AMPLITUDE_N, number, ros_name, seed_type
+
+if TYPE_CHECKING:
+    from ..core.recording.signals import Recording
 
 HELP = "offline: run the motor model faster than real time and write a recording"
 #: Output options, checked before any work starts (see common.check_outputs).
@@ -61,10 +66,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from ..api.simulation import simulation_run
-    from ..bagio import write_recording
+    from ..api.simulation import simulation_plan
+    from ..bagio.write import recording_writer
     from ..core.physics.motor import effective_substeps
     from ..core.physics.plant import plant_to_dict
     from ..progress import activity
@@ -74,26 +77,32 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     started = time.perf_counter()
     with activity("simulate") as say:
-        sim = simulation_run(args.plant, excitation=args.excitation, duration=args.duration,
-                             seed=args.seed, amplitude=args.amplitude,
-                             excitation_options=dict(args.excitation_option))
-        rec, plant, source = sim.recording, sim.plant, sim.source
-        sim_s = time.perf_counter() - started
-        say("writing the recording")
+        plan = simulation_plan(args.plant, excitation=args.excitation, duration=args.duration,
+                               seed=args.seed, amplitude=args.amplitude,
+                               excitation_options=dict(args.excitation_option))
+        stats = _Stats()
         with atomic_dir(out, "--out") as tmp:  # complete, or not there at all
-            write_recording(tmp, rec, namespace=args.namespace, storage=args.storage)
+            blocks = stats.timed(plan.blocks())
+            first = next(blocks)
+            with recording_writer(tmp, first, namespace=args.namespace,
+                                  storage=args.storage) as writer:
+                writer.write(first)
+                for block in blocks:  # one block in memory at a time
+                    say(f"written {stats.n - len(block)} of {plan.samples} samples")
+                    writer.write(block)
     total_s = time.perf_counter() - started
-    n, fs = len(rec), plant.sample_rate_hz
+    plant, source = plan.plant, plan.source
+    n, fs = stats.n, plant.sample_rate_hz
     summary = {
         "out": str(out), "storage": args.storage, "namespace": args.namespace,
         "samples": n, "sample_rate_hz": fs, "duration_s": n / fs,
         "excitation": args.excitation, "amplitude_n": source.amplitude_n,
         "excitation_options": source.options, "seed": args.seed,
-        "plant_file": sim.plant_label, "plant": plant_to_dict(plant),
+        "plant_file": plan.plant_label, "plant": plant_to_dict(plant),
         "effects": list(plant.effects), "rk4_substeps": effective_substeps(plant),
-        "thrust_rms_n": float(np.std(rec.thrust)), "speed_rms_mps": float(np.std(rec.speed)),
-        "position_min_m": float(rec.position.min()), "position_max_m": float(rec.position.max()),
-        "simulate_s": sim_s, "total_s": total_s, "realtime_factor": (n / fs) / total_s,
+        "thrust_rms_n": stats.std("thrust"), "speed_rms_mps": stats.std("speed"),
+        "position_min_m": stats.low, "position_max_m": stats.high,
+        "simulate_s": stats.seconds, "total_s": total_s, "realtime_factor": (n / fs) / total_s,
     }
     effects = ", ".join(plant.effects) or "none"
     print(f"wrote {out}: {n} samples at {fs:g} Hz ({n / fs:g} s), {args.excitation} "
@@ -102,3 +111,38 @@ def run(args: argparse.Namespace) -> int:
           file=sys.stderr if args.json == "-" else sys.stdout)
     write_json(summary, args.json)
     return 0
+
+
+class _Stats:
+    """Standard deviations and the position range over blocks (the summary's numbers)."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.seconds = 0.0  # spent simulating
+        self.low, self.high = math.inf, -math.inf
+        self._sum = {"thrust": 0.0, "speed": 0.0}
+        self._sq = {"thrust": 0.0, "speed": 0.0}
+
+    def add(self, rec: Recording) -> None:
+        self.n += len(rec)
+        self.low = min(self.low, float(rec.position.min()))
+        self.high = max(self.high, float(rec.position.max()))
+        for name in self._sum:
+            x = rec.signal(name)
+            self._sum[name] += float(x.sum())
+            self._sq[name] += float(x @ x)
+
+    def timed(self, blocks: Iterator[Recording]) -> Iterator[Recording]:
+        """The blocks, each added to the statistics and its simulation timed."""
+        while True:
+            t0 = time.perf_counter()
+            block = next(blocks, None)
+            self.seconds += time.perf_counter() - t0
+            if block is None:
+                return
+            self.add(block)
+            yield block
+
+    def std(self, name: str) -> float:
+        mean = self._sum[name] / self.n
+        return math.sqrt(max(self._sq[name] / self.n - mean * mean, 0.0))

@@ -3,7 +3,7 @@ excitation signals and the sampled simulator of the linear PMSM axis.
 """
 
 from .excitation import ExcitationSource, make_excitation
-from .motor import MotorSimulator, MotorState, simulate
+from .motor import MotorSimulator, MotorState, simulate, simulate_blocks
 from .plant import (
     Plant,
     dump_plant,
@@ -17,5 +17,5 @@ from .plant import (
 __all__ = [
     "ExcitationSource", "MotorSimulator", "MotorState", "Plant", "dump_plant", "load_plant",
     "make_excitation", "nominal_plant", "packaged_plant_path", "plant_from_dict",
-    "plant_to_dict", "simulate"
+    "plant_to_dict", "simulate", "simulate_blocks"
 ]

@@ -33,7 +33,7 @@ from __future__ import annotations
 import json
 import math
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -350,20 +350,19 @@ def _quantise(value: float, step: float) -> float:
     return round(value / step) * step if step > 0 else value
 
 
-def simulate(plant: Plant, thrust: ArrayLike, seed: int = 0, x0: float = 0.0, v0: float = 0.0,
-             t0: float = 0.0) -> Recording:
-    """Run ``thrust`` (one value per sample) through the plant (zero-order hold).
-
-    ``speed[k], position[k]`` are measured at ``t[k] = t0 + k/fs``, then ``thrust[k]`` is
-    held over [t_k, t_{k+1}), so y(k) depends on u(k-1) and earlier.
-    """
+def _checked(thrust: ArrayLike, k0: int = 0) -> FloatArray:
     u = np.asarray(thrust, dtype=np.float64)
     if u.ndim != 1 or len(u) < 1:
         raise DataError(f"thrust must be a 1-D array with samples, got shape {u.shape}")
     if not np.isfinite(u).all():
-        first = int(np.argmax(~np.isfinite(u)))
+        first = k0 + int(np.argmax(~np.isfinite(u)))
         raise DataError(f"thrust has non-finite samples (first at index {first})")
-    sim = MotorSimulator(plant, seed=seed, x0=x0, v0=v0)
+    return u
+
+
+def _run(sim: MotorSimulator, plant: Plant, u: FloatArray, seed: int, k0: int,
+         t0: float) -> Recording:
+    """Samples ``k0 ..`` of a simulation: measure, record the thrust, advance; per sample."""
     n = len(u)
     speed = np.empty(n)
     position = np.empty(n)
@@ -375,6 +374,30 @@ def simulate(plant: Plant, thrust: ArrayLike, seed: int = 0, x0: float = 0.0, v0
     fs = plant.sample_rate_hz
     meta = {"plant": json.dumps(plant_to_dict(plant), sort_keys=True), "seed": str(seed),
             "simulator": "pmsm_sysid.core.physics.motor"}
-    return Recording(t=t0 + np.arange(n) / fs, thrust=recorded, speed=speed,
+    return Recording(t=t0 + (k0 + np.arange(n)) / fs, thrust=recorded, speed=speed,
                      position=position, sample_rate_hz=fs, source="simulate", meta=meta)
 
+
+def simulate(plant: Plant, thrust: ArrayLike, seed: int = 0, x0: float = 0.0, v0: float = 0.0,
+             t0: float = 0.0) -> Recording:
+    """Run ``thrust`` (one value per sample) through the plant (zero-order hold).
+
+    ``speed[k], position[k]`` are measured at ``t[k] = t0 + k/fs``, then ``thrust[k]`` is
+    held over [t_k, t_{k+1}), so y(k) depends on u(k-1) and earlier.
+    """
+    u = _checked(thrust)
+    return _run(MotorSimulator(plant, seed=seed, x0=x0, v0=v0), plant, u, seed, 0, t0)
+
+
+#: Samples per block of :func:`simulate_blocks` (8 MB of arrays).
+BLOCK = 1 << 16
+
+
+def simulate_blocks(plant: Plant, thrust: Callable[[int, int], ArrayLike], n: int,
+                    seed: int = 0, block: int = BLOCK) -> Iterator[Recording]:
+    """:func:`simulate` of ``n`` samples, ``block`` at a time: the same numbers, with the
+    memory of one block. ``thrust(k0, m)`` gives samples ``k0 .. k0+m-1`` of the input."""
+    sim = MotorSimulator(plant, seed=seed)
+    for k0 in range(0, n, block):
+        u = _checked(thrust(k0, min(block, n - k0)), k0)
+        yield _run(sim, plant, u, seed, k0, 0.0)
