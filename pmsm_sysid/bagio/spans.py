@@ -17,7 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from .. import topics as tp
-from ..core.errors import BagError
+from ..core.errors import BagError, DataError
+from ..core.recording.signals import Recording
 from ..core.recording.spans import MAX_SAMPLES, Excerpt, excerpt_of, join, plan_spans
 from .cdr import decode_stamped
 from .common import open_reader, typestore
@@ -29,8 +30,16 @@ MARGIN_NS = 2_000_000_000
 MIN_SHARE = 0.95
 
 
+def _stamp(conn: Any, data: bytes) -> int:
+    got = decode_stamped(data) if conn.msgtype != tp.JOINT_STATE_TYPE else None
+    if got is not None:
+        return got[0]
+    return _stamp_ns(typestore().deserialize_cdr(data, conn.msgtype))
+
+
 def _extent(path: Path, namespace: str | None) -> tuple[int, int, int, int]:
-    """(samples, first stamp ns, its log time ns, duration ns) from the bag's index."""
+    """(samples, first stamp, its log time, last stamp) in ns, from the bag's index and its
+    first and last position messages (the last read through the time index)."""
     with open_reader(path) as reader:
         found = {c.topic: c.msgtype for c in reader.connections}
         layout = _choose_layout(path, found, namespace)
@@ -40,13 +49,10 @@ def _extent(path: Path, namespace: str | None) -> tuple[int, int, int, int]:
         first = next(iter(reader.messages(connections=conns)), None)
         if first is None:
             raise BagError(f"{path}: no messages on {topic} (empty recording)")
-        conn, logged, data = first
-        got = decode_stamped(data) if conn.msgtype != tp.JOINT_STATE_TYPE else None
-        stamp = got[0] if got is not None else _stamp_ns(
-            typestore().deserialize_cdr(data, conn.msgtype))
-        return count, stamp, int(logged), int(reader.duration)
-
-
+        stamp0 = _stamp(first[0], first[2])
+        tail = reader.messages(connections=conns, start=max(0, reader.end_time - MARGIN_NS))
+        last = max((_stamp(conn, data) for conn, _, data in tail), default=stamp0)
+        return count, stamp0, int(first[1]), last
 def read_excerpt(path: str | Path, *, namespace: str | None = None,
                  max_samples: int = MAX_SAMPLES, split: float | None = None) -> Excerpt:
     """The spans of the bag at ``path`` that :func:`plan_spans` chooses, read apart.
@@ -55,29 +61,34 @@ def read_excerpt(path: str | Path, *, namespace: str | None = None,
     the end of the recording is held out (spans planned on each side of the cut).
     """
     path = Path(path)
-    count, stamp0, log0, duration = _extent(path, namespace)
-    if count <= max_samples or duration <= 0:
-        rec = read_recording(path, namespace=namespace).recording
-        return excerpt_of(rec, plan_spans(len(rec), max_samples, split))
-    period = duration / max(count - 1, 1)  # ns per sample, from the index
+    count, stamp0, log0, stamp1 = _extent(path, namespace)
+    if count <= max_samples or stamp1 <= stamp0:
+        whole = read_recording(path, namespace=namespace).recording
+        return excerpt_of(whole, plan_spans(len(whole), max_samples, split))
+    period = (stamp1 - stamp0) / (count - 1)  # ns per sample
     parts = []
     for a, b in plan_spans(count, max_samples, split):
         lo = stamp0 + round((a - 0.5) * period)
         hi = stamp0 + round((b - 0.5) * period)
         shift = log0 - stamp0
         window: Window = (lo + shift - MARGIN_NS, hi + shift + MARGIN_NS, lo, hi)
-        rec = _span(path, namespace, window)
-        if len(rec) < MIN_SHARE * (b - a):  # log times far from the stamps: scan the bag
-            rec = _span(path, namespace, (None, None, lo, hi))
-        if len(rec) < 2:
-            raise BagError(f"{path}: no aligned samples in span {a}:{b} of its {count}")
+        got = _span(path, namespace, window)
+        if got is None or len(got) < MIN_SHARE * (b - a):  # log times far from the stamps:
+            whole_scan: Window = (None, None, lo, hi)  # scan the bag, keep the span
+            got = read_recording(path, namespace=namespace, window=whole_scan).recording
+        rec = got
         start = round((rec.t[0] * 1e9 - stamp0) / period)
         parts.append((rec, max(0, min(int(start), count - len(rec)))))
     return join(parts, count)
 
 
-def _span(path: Path, namespace: str | None, window: Window) -> Any:
-    return read_recording(path, namespace=namespace, window=window).recording
+def _span(path: Path, namespace: str | None, window: Window) -> Recording | None:
+    """The aligned samples of one span read through the time index, or None if too few
+    were logged within its window to align."""
+    try:
+        return read_recording(path, namespace=namespace, window=window).recording
+    except (BagError, DataError):
+        return None
 
 
 __all__ = ["read_excerpt"]

@@ -34,14 +34,17 @@ OUTPUTS = {"json": "file", "corrected_plant": "file", "report": "report"}
 
 def _budget(text: str) -> int:
     """--max-samples: a whole number, at least ten spans of the shortest span."""
-    from ..core.errors import DataError
-    from ..core.recording.spans import check_budget
+    from ..core.recording.spans import MIN_SPAN, SPANS
 
+    low = SPANS * MIN_SPAN
     try:
-        return check_budget(int(text))
-    except (ValueError, DataError) as exc:
-        raise argparse.ArgumentTypeError(str(exc).replace("max_samples", "--max-samples")) \
-            from exc
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < low:
+        raise argparse.ArgumentTypeError(f"expected a whole number of at least {low} "
+                                         f"(ten spans of {MIN_SPAN} samples), got '{text}'")
+    return value
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -114,7 +114,7 @@ def raw_columns(e: Effect, data: EquationData) -> FloatArray:
         g = travel_gain(data.v, data.period, 1.0 / e.pitch_m, data.mode) * data.force
         return np.column_stack([g * np.sin(k * x), g * np.cos(k * x)])
     if e.name == "thrust_lag" and not e.dynamic:
-        d = np.diff(data.cmd, prepend=data.cmd[0]) / data.period
+        d = data.per_interval(lambda c: np.diff(c, prepend=c[0]), data.cmd) / data.period
         return data.pair(d)[:, None]
     raise DiagnoseError(f"effect '{e.name}' has no linear regressor")
 
