@@ -149,19 +149,13 @@ def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike |
     if sim is None:
         model, label = resolve_plant(plant)
     split = options.split if validate is None else None
-    if sim is None:
-        rec = _excerpt(real, "real", namespace, options.max_samples, split, joint)
-        held = None if validate is None else _excerpt(validate, "validate", namespace,
-                                                      options.max_samples, None, joint)
-    else:  # the plants of both recordings are fitted from the whole recordings
-        rec = excerpt_of(_recording(real, "real", namespace, joint))
-        held = None if validate is None else excerpt_of(_recording(validate, "validate",
-                                                                   namespace, joint))
-    sim_rec = None if sim is None else _recording(sim, "sim", sim_namespace, sim_joint)
-    _check_recordings((("real", real, rec), ("validate", validate, held)), identify=False)
-    if sim_rec is not None:
-        _check_recordings((("sim", sim, excerpt_of(sim_rec)), ("real", real, rec),
-                           ("validate", validate, held)), identify=True)
+    rec = _excerpt(real, "real", namespace, options.max_samples, split, joint)
+    held = None if validate is None else _excerpt(validate, "validate", namespace,
+                                                  options.max_samples, None, joint)
+    sim_rec = None if sim is None else _excerpt(sim, "sim", sim_namespace,
+                                                options.max_samples, options.split, sim_joint)
+    _check_recordings((("sim", sim, sim_rec), ("real", real, rec),
+                       ("validate", validate, held)), identify=sim is not None)
     sources = {}
     if sim is None and plant is not None and not isinstance(plant, Plant):
         sources["plant_file"] = label
@@ -169,8 +163,7 @@ def diagnose(plant: PlantLike, real: RecordingLike, *, validate: RecordingLike |
         if isinstance(value, (str, os.PathLike)):
             sources[key] = str(value)
     if sim_rec is not None:
-        return Diagnosis(diagnose_sim(sim_rec, rec.joined, None if held is None
-                                      else held.joined, options), rec.joined, sources, rec)
+        return Diagnosis(diagnose_sim(sim_rec, rec, held, options), rec.joined, sources, rec)
     return Diagnosis(run_diagnosis(model, rec, held, options), rec.joined, sources, rec)
 
 
@@ -191,4 +184,4 @@ def _check_recordings(items: tuple[tuple[str, Any, Excerpt | None], ...],
         for part in ex.parts:
             check_sampling(part.t, part.sample_rate_hz, f"{label} {where}")
         if identify:
-            check_identifiable(ex.joined, f"{label} {where}")
+            check_identifiable(ex.parts, f"{label} {where}")

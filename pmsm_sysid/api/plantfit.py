@@ -10,6 +10,7 @@ from ..core.discrepancy.fitted import PlantFitResult
 from ..core.physics.plant import Plant
 from ..core.plantfit.found import FoundEffect
 from ..core.recording.signals import Recording
+from ..core.recording.spans import MAX_SAMPLES, MIN_SPAN, SPANS, Excerpt
 from . import _checks
 from ._json import plain
 
@@ -32,9 +33,12 @@ class PlantFit:
 
     result: PlantFitResult
     recording: Recording
-    """The recording the plant was fitted from."""
+    """The recording the plant was fitted from: all of it, or the spans of a recording
+    longer than ``max_samples`` end to end (see :attr:`excerpt`)."""
     sources: dict[str, str] = field(default_factory=dict)
     """``recording``, ``validate``: the files given (paths only)."""
+    excerpt: Excerpt | None = None
+    """Which samples of the recording were used (``total``, ``ranges()``)."""
 
     @property
     def plant(self) -> Plant:
@@ -74,7 +78,8 @@ def load(data: RecordingLike, label: str, namespace: str | None,
 
 def fit_plant(recording: RecordingLike, *, validate: RecordingLike | None = None,
               namespace: str | None = None, alpha: float = 1e-3,
-              min_share: float = 0.01, joint: str | None = None) -> PlantFit:
+              min_share: float = 0.01, joint: str | None = None,
+              max_samples: int = MAX_SAMPLES) -> PlantFit:
     """Identify the physical plant of one axis from a recording of it.
 
     Mass and viscous damping are always estimated (instrumental variables built from the
@@ -88,8 +93,9 @@ def fit_plant(recording: RecordingLike, *, validate: RecordingLike | None = None
     ``recording`` and ``validate`` (held-out data; default: the last 30 % of
     ``recording``): :class:`Recording` objects or bag paths (any layout ``read_bag``
     reads, topics or JointState); ``namespace`` picks the topics, ``joint`` the axis's joint
-    of a JointState recording of several joints. ``alpha`` and
-    ``min_share`` as in :func:`diagnose`. The plant's ``sample_rate_hz`` is the
+    of a JointState recording of several joints. ``alpha``, ``min_share`` and
+    ``max_samples`` (a longer recording is used in ten spans spread evenly over it; of a
+    bag only those are read) as in :func:`diagnose`. The plant's ``sample_rate_hz`` is the
     recording's; it drives ``simulate``, the sim node and ``diagnose --plant``.
 
     Raises :class:`PmsmSysidError` before any work when the recording cannot identify a
@@ -107,21 +113,26 @@ def fit_plant(recording: RecordingLike, *, validate: RecordingLike | None = None
     from ..core.plantfit.fit import FitOptions
     from ..core.plantfit.physical import check_identifiable
     from ..core.selection.datacheck import check_sampling
+    from .diagnosis import _excerpt
 
     opts = FitOptions(alpha=_checks.fraction("alpha", alpha),
-                      min_share=_checks.fraction("min_share", min_share))
-    rec = load(recording, "recording", namespace, joint)
-    held = None if validate is None else load(validate, "validate", namespace, joint)
+                      min_share=_checks.fraction("min_share", min_share),
+                      max_samples=_checks.count("max_samples", max_samples, SPANS * MIN_SPAN))
+    split = opts.split if validate is None else None
+    rec = _excerpt(recording, "recording", namespace, opts.max_samples, split, joint)
+    held = None if validate is None else _excerpt(validate, "validate", namespace,
+                                                  opts.max_samples, None, joint)
     sources: dict[str, str] = {}
-    for key, given, r in (("recording", recording, rec), ("validate", validate, held)):
-        if r is None:
+    for key, given, ex in (("recording", recording, rec), ("validate", validate, held)):
+        if ex is None:
             continue
         where = str(given) if isinstance(given, (str, os.PathLike)) else key
         if isinstance(given, (str, os.PathLike)):
             sources[key] = str(given)
-        check_sampling(r.t, r.sample_rate_hz, f"recording {where}")
-        check_identifiable(r, f"recording {where}")
-    return PlantFit(run_fit(rec, held, opts), rec, sources)
+        for part in ex.parts:
+            check_sampling(part.t, part.sample_rate_hz, f"recording {where}")
+        check_identifiable(ex.parts, f"recording {where}")
+    return PlantFit(run_fit(rec, held, opts), rec.joined, sources, rec)
 
 
 __all__ = ["PlantFit", "fit_plant"]

@@ -116,6 +116,23 @@ def parse_range(text: str) -> tuple[int, int]:
     return start, stop
 
 
+def budget(text: str) -> int:
+    """--max-samples: a whole number, at least ten spans of the shortest span."""
+    import argparse
+
+    from ..core.recording.spans import MIN_SPAN, SPANS
+
+    low = SPANS * MIN_SPAN
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < low:
+        raise argparse.ArgumentTypeError(f"expected a whole number of at least {low} "
+                                         f"(ten spans of {MIN_SPAN} samples), got '{text}'")
+    return value
+
+
 def parse_fraction(text: str) -> float:
     """A number strictly between 0 and 1 (for argparse)."""
     import argparse

@@ -23,28 +23,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import parse_fraction, ros_name, write_json, write_text
+from .common import budget, parse_fraction, ros_name, write_json, write_text
 
 HELP = "sim-to-real: locate the mismatch, name the missing physics, model it, show the fit"
 #: Output options, checked before any work starts (see common.check_outputs).
 OUTPUTS = {"json": "file", "corrected_plant": "file", "report": "report"}
 
 
-
-
-def _budget(text: str) -> int:
-    """--max-samples: a whole number, at least ten spans of the shortest span."""
-    from ..core.recording.spans import MIN_SPAN, SPANS
-
-    low = SPANS * MIN_SPAN
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < low:
-        raise argparse.ArgumentTypeError(f"expected a whole number of at least {low} "
-                                         f"(ten spans of {MIN_SPAN} samples), got '{text}'")
-    return value
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -72,7 +57,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="smallest share of the mismatch an effect must explain (default 0.01)")
     p.add_argument("--no-replay", action="store_true",
                    help="skip the short-horizon speed replay (output error)")
-    p.add_argument("--max-samples", type=_budget, default=None, metavar="N",
+    p.add_argument("--max-samples", type=budget, default=None, metavar="N",
                    help="samples used at most of each recording (default 120000); a longer "
                         "one is used in ten spans spread evenly over it, and only those are "
                         "read")

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import parse_fraction, ros_name, write_json, write_text
+from .common import budget, parse_fraction, ros_name, write_json, write_text
 
 HELP = "the physical plant (mass, viscous damping, effects, with errors) of a recording"
 #: Output options, checked before any work starts (see common.check_outputs).
@@ -34,6 +34,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="family-wise false-alarm level of each selection step (default 1e-3)")
     p.add_argument("--min-share", type=parse_fraction, default=0.01,
                    help="smallest share of the force an effect must explain (default 0.01)")
+    p.add_argument("--max-samples", type=budget, default=None, metavar="N",
+                   help="samples used at most of each recording (default 120000); a longer "
+                        "one is used in ten spans spread evenly over it, and only those are "
+                        "read")
     p.add_argument("--json", metavar="FILE",
                    help="write the plant, its standard errors, effects and fit as JSON "
                         "('-' = stdout)")
@@ -41,12 +45,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="no progress bar on the terminal (there is none when not a terminal)")
 
 
-def header(rec: object, path: str) -> str:
-    """The first line: what was read."""
+def header(rec: object, path: str, total: int | None = None) -> str:
+    """The first line: what was read (``total``: the recording's length, when only part of
+    it was used)."""
     n = len(rec)  # type: ignore[arg-type]
     fs = getattr(rec, "sample_rate_hz", 0.0)
     derived = ", speed derived from position" if getattr(rec, "speed_derived", False) else ""
-    return f"fit-plant: recording {path} ({n} samples at {fs:g} Hz{derived})"
+    used = "" if total in (None, n) else f", {n} used: see 'data used'"
+    size = f"{n if total is None else total} samples at {fs:g} Hz{used}"
+    return f"fit-plant: recording {path} ({size}{derived})"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,10 +61,13 @@ def run(args: argparse.Namespace) -> int:
     from ..progress import activity
 
     with activity("fit-plant"):
+        size = {} if args.max_samples is None else {"max_samples": args.max_samples}
         fit = fit_plant(args.bag, validate=args.validate, namespace=args.namespace,
-                        alpha=args.alpha, min_share=args.min_share, joint=args.joint)
+                        alpha=args.alpha, min_share=args.min_share, joint=args.joint,
+                        **size)
     out = sys.stderr if args.json == "-" else sys.stdout
-    print(header(fit.recording, args.bag), file=out)
+    total = fit.excerpt.total if fit.excerpt is not None else None
+    print(header(fit.recording, args.bag, total), file=out)
     print(fit.summary(), file=out)
     head = (f"# Plant fitted by pmsm-sysid fit-plant from {args.bag}: mass, viscous damping\n"
             "# and the effects found (standard errors in its --json); rs_ohm, ls_h and "

@@ -33,10 +33,12 @@ import numpy as np
 from ..errors import DiagnoseError, PmsmSysidError
 from ..physics.plant import Plant
 from ..plantfit.found import FoundEffect
-from ..plantfit.kinematics import EquationData, equation_data, thinned, thinned_times
+from ..plantfit.kinematics import EquationData, thinned, thinned_times
+from ..plantfit.parts import equation_data_parts
 from ..plantfit.physical import PhysicalFit, plant_and_std
 from ..plantfit.stats import HeldOutTest, held_out_test, nrmse
 from ..recording.signals import Recording
+from ..recording.spans import Excerpt
 from .changes import Change, compare, found_by_name
 from .diagnose import DiagnoseOptions, cap_on_replay
 from .fitted import PlantFitResult, fit_plant
@@ -50,7 +52,8 @@ from .sidebyside import SimComparison, apply_changes, beyond_sim, groups, sim_on
 SEGMENTS = ("estimation", "validation")
 
 
-def diagnose_sim(sim: Recording, real: Recording, validate: Recording | None = None,
+def diagnose_sim(sim: Recording | Excerpt, real: Recording | Excerpt,
+                 validate: Recording | Excerpt | None = None,
                  options: DiagnoseOptions | None = None) -> DiagnoseResult:
     """The module doc's method; raises DiagnoseError on unusable input."""
     opts = options or DiagnoseOptions()
@@ -62,8 +65,8 @@ def diagnose_sim(sim: Recording, real: Recording, validate: Recording | None = N
         raise DiagnoseError(f"diagnosis failed on these data: {exc}") from exc
 
 
-def _against(sim_rec: Recording, real_rec: Recording, validate: Recording | None,
-             opts: DiagnoseOptions) -> DiagnoseResult:
+def _against(sim_rec: Recording | Excerpt, real_rec: Recording | Excerpt,
+             validate: Recording | Excerpt | None, opts: DiagnoseOptions) -> DiagnoseResult:
     sim = fit_plant(sim_rec, None, opts)
     real = fit_plant(real_rec, validate, opts)
     rows, notes, n_tests = compare(sim.physical, real.physical, opts.alpha)
@@ -84,8 +87,8 @@ def _against(sim_rec: Recording, real_rec: Recording, validate: Recording | None
     notes += replay_notes(table, list(groups(rows)))
     notes += [f"simulation's recording: {n}" for n in sim.notes]
     notes += [f"real recording: {n}" for n in real.notes]
-    gfrf = gfrf_where(sim.plant, real.physical.segs.recs["estimation"], opts.alpha) \
-        if opts.gfrf else None
+    pieces = real.physical.segs.pieces("estimation")
+    gfrf = gfrf_where(sim.plant, pieces[len(pieces) // 2], opts.alpha) if opts.gfrf else None
     comparison = SimComparison(sim, real, tuple(rows), tuple(only + less), n_tests)
     return DiagnoseResult(
         plant=sim.plant, corrected=apply_changes(sim.plant, real.plant, rows),
@@ -100,7 +103,8 @@ def _data(plant: Plant, pf: PhysicalFit, segment: str) -> EquationData:
     """``plant``'s equation data on a segment of the real recording, built as the real
     fit built its own (same filter, kinematic mode and loop)."""
     d = pf.segs.est if segment == "estimation" else pf.segs.val
-    return equation_data(plant, pf.segs.recs[segment], d.filt, d.mode, pf.setup.closed)
+    return equation_data_parts(plant, pf.segs.pieces(segment), d.filt, d.mode,
+                               pf.setup.closed)
 
 
 def _table(sim_plant: Plant, corrected: Plant, before: dict[str, EquationData],
@@ -109,8 +113,12 @@ def _table(sim_plant: Plant, corrected: Plant, before: dict[str, EquationData],
     """Force NRMSE before/after on both segments, and the speed replay when asked."""
     table: dict[str, Any] = {}
     replays: dict[str, dict[str, Any]] = {}
-    horizon = choose_horizon((sim_plant, corrected), pf.segs.recs["estimation"]) \
-        if opts.replay else None
+    def sizes(seg: str) -> tuple[int, ...]:
+        pieces = pf.segs.pieces(seg)
+        return tuple(len(p) for p in pieces) if len(pieces) > 1 else ()
+
+    horizon = choose_horizon((sim_plant, corrected), pf.segs.recs["estimation"],
+                             parts=sizes("estimation")) if opts.replay else None
     for seg in SEGMENTS:
         b, a = before[seg], after[seg]
         target = b.project(b.force)
@@ -118,7 +126,7 @@ def _table(sim_plant: Plant, corrected: Plant, before: dict[str, EquationData],
                                "nrmse_after": nrmse(target, a.y), "samples": b.n}
         if horizon is not None:
             rec = pf.segs.recs[seg]
-            cmp = replay_compare(sim_plant, corrected, rec, horizon)
+            cmp = replay_compare(sim_plant, corrected, rec, horizon, sizes(seg))
             row["output_error"] = cmp.to_dict()
             replays[seg] = {"t": rec.t, "measured": rec.speed, "before": cmp.before.speed,
                             "after": cmp.after.speed}

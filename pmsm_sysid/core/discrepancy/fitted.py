@@ -26,6 +26,8 @@ from ..plantfit.found import FoundEffect, effect_line
 from ..plantfit.physical import PhysicalFit, fit_physical
 from ..plantfit.stats import nrmse
 from ..recording.signals import Recording
+from ..recording.spans import Excerpt
+from .result import used_lines
 from .showfit import scan_unexplained
 
 
@@ -60,7 +62,8 @@ class PlantFitResult:
     def summary(self) -> str:
         """Lines for people: mass and viscous ± standard error, effects, fit, notes."""
         p, s = self.plant, self.std
-        lines = [f"  mass_kg = {p.mass_kg:.5g} ± {s['mass_kg']:.2g}",
+        lines = used_lines(self.method)
+        lines += [f"  mass_kg = {p.mass_kg:.5g} ± {s['mass_kg']:.2g}",
                  f"  viscous_n_per_mps = {p.viscous_n_per_mps:.5g} ± "
                  f"{s['viscous_n_per_mps']:.2g}"]
         if not self.effects:
@@ -77,7 +80,7 @@ class PlantFitResult:
         return "\n".join(lines)
 
 
-def fit_plant(rec: Recording, validate: Recording | None = None,
+def fit_plant(rec: Recording | Excerpt, validate: Recording | Excerpt | None = None,
               opts: FitOptions | None = None) -> PlantFitResult:
     """The module doc's method; raises :class:`DiagnoseError` on unusable input."""
     opts = opts or FitOptions()
@@ -137,6 +140,7 @@ def method(pf: PhysicalFit, opts: FitOptions, has_validate: bool) -> dict[str, A
         "iterations": pf.iterations, "selection_rounds": pf.rounds,
         "alpha": opts.alpha, "min_share": opts.min_share,
         "sample_rate_hz": 1.0 / d.period,
+        "data_used": pf.segs.used,
     }
 
 

@@ -23,6 +23,16 @@ if TYPE_CHECKING:
 
 FloatArray = NDArray[np.float64]
 
+def used_lines(method: dict[str, Any]) -> list[str]:
+    """'data used: ...' for each recording of which spans were used (none when whole)."""
+    out = []
+    for key, used in (method.get("data_used") or {}).items():
+        if not used.get("whole", True):
+            label = "" if key == "recording" else " (held-out recording)"
+            out.append(f"data used{label}: {used['text']}")
+    return out
+
+
 @dataclass(frozen=True)
 class Curves:
     """Series for figures (not part of the JSON): one entry per data segment."""
@@ -75,10 +85,7 @@ class DiagnoseResult:
         what = "the nominal plant" if self.against is None else "the simulation's plant"
         lines = self.against.summary_lines() if self.against is not None else []
         lines.append(f"equation-error NRMSE of {what}: {self.nrmse_before:.4f}")
-        for key, used in (self.method.get("data_used") or {}).items():
-            if not used.get("whole", True):
-                label = "" if key == "recording" else " (held-out recording)"
-                lines.append(f"data used{label}: {used['text']}")
+        lines += used_lines(self.method)
         named = [e for e in self.effects if e.name != "unexplained"]
         if not named:
             lines.append("no significant missing physics"

@@ -90,7 +90,9 @@ def _filter_for(spec: FilterSpec, fs: float) -> FilterSpec:
                    edge=int(np.ceil(3.0 * fs / spec.cutoff_hz)))
 
 
-def _excerpt(rec: Recording | Excerpt, max_samples: int, split: float | None) -> Excerpt:
+def excerpt_for(rec: Recording | Excerpt, max_samples: int, split: float | None) -> Excerpt:
+    """The spans of ``rec`` a fit uses (:func:`..recording.spans.plan_spans`); an
+    :class:`Excerpt` (the spans already read) as it is."""
     if isinstance(rec, Excerpt):
         return rec
     return excerpt_of(rec, plan_spans(len(rec), max_samples, split))
@@ -130,8 +132,8 @@ def segments(plant: Plant, real: Recording | Excerpt, validate: Recording | Exce
     A recording longer than ``max_samples`` is used in spans spread over it
     (:func:`..recording.spans.plan_spans`); an :class:`Excerpt` says which were read.
     """
-    ex = _excerpt(real, max_samples, split if validate is None else None)
-    vex = None if validate is None else _excerpt(validate, max_samples, None)
+    ex = excerpt_for(real, max_samples, split if validate is None else None)
+    vex = None if validate is None else excerpt_for(validate, max_samples, None)
     for e in (ex, vex):
         if e is not None:
             check_finite(e.joined)

@@ -45,19 +45,20 @@ from numpy.typing import NDArray
 from ..errors import DataError, InsufficientExcitationError, PlantError, PmsmSysidError
 from ..physics.plant import Plant
 from ..recording.signals import Recording, check_finite
+from ..recording.spans import Excerpt, Parts, as_parts
 from .estimate import Fit, design, refine
-from .feedback import FEEDBACK_Z, feedback_z
-from .fit import EffectsFit, FitOptions, Segments, fit_effects, segments
+from .feedback import FEEDBACK_Z, feedback_z, high_band
+from .fit import EffectsFit, FitOptions, Segments, excerpt_for, fit_effects, segments
 from .found import FoundEffect
 from .kinematics import (
     MIN_SAMPLES,
     EquationData,
     FilterSpec,
     choose_filter,
-    equation_data,
     kinematic_mode,
 )
 from .library import Effect
+from .parts import equation_data_parts
 from .stats import ar_whitener, lstsq
 from .translate import _polar, corrected_plant, effect_params
 
@@ -119,27 +120,31 @@ class PhysicalFit:
         return self.joint.effects[len(RIGID):]
 
 
-def check_identifiable(rec: Recording, label: str = "recording") -> None:
+def check_identifiable(rec: Parts, label: str = "recording") -> None:
     """One clear error before any work when ``rec`` cannot identify a plant.
 
     A plant needs motion above the measurement noise, a thrust that varies (mass and
     viscous damping are told apart by acceleration and speed that do not move in step) and
     enough samples for an estimation and a held-out part after the filter's edges.
+    ``rec`` may be the spans of a long recording (the parts used): they are judged together.
     """
-    check_finite(rec)
-    n, fs = len(rec), rec.sample_rate_hz
+    parts = as_parts(rec)
+    for p in parts:
+        check_finite(p)
+    n, fs = sum(len(p) for p in parts), parts[0].sample_rate_hz
+    thrust = np.concatenate([p.thrust for p in parts])
     if n < MIN_PLANT_SAMPLES:
         raise DataError(
             f"{label}: {n} samples ({n / fs:.3g} s) are too short to identify a plant: it "
             f"needs at least {MIN_PLANT_SAMPLES} samples of motion ({MIN_PLANT_SAMPLES / fs:.3g}"
             f" s at {fs:g} Hz), better several seconds")
-    if float(np.ptp(rec.thrust)) <= 1e-9 * max(1.0, float(np.max(np.abs(rec.thrust)))):
+    if float(np.ptp(thrust)) <= 1e-9 * max(1.0, float(np.max(np.abs(thrust)))):
         raise InsufficientExcitationError(
             f"{label}: the thrust is constant: no excitation to identify a plant from; it "
             "needs a varying thrust (a chirp, multisine, PRBS or a positioning move)")
-    _check_motion(rec, label)
+    _check_motion(parts, label)
     try:
-        spec = choose_filter(rec.speed, fs)
+        spec = choose_filter([p.speed for p in parts], fs)
     except PmsmSysidError as exc:
         raise DataError(f"{label}: {exc}; a plant needs a recording of the axis moving") \
             from exc
@@ -149,17 +154,15 @@ def check_identifiable(rec: Recording, label: str = "recording") -> None:
             f"{label}: {n} samples ({n / fs:.3g} s) are too short for its slow motion "
             f"(speed band {spec.band_hz:.3g} Hz): identifying a plant needs at least "
             f"{math.ceil(need / 0.3)} samples ({need / 0.3 / fs:.3g} s)")
-    _check_rigid_excitation(rec, spec, label)
+    _check_rigid_excitation(parts, spec, label)
 
 
-def _check_motion(rec: Recording, label: str) -> None:
+def _check_motion(parts: list[Recording], label: str) -> None:
     """The position must travel well beyond its own noise (read above 0.3 fs)."""
-    from scipy.signal import butter, sosfiltfilt
-
-    x = np.asarray(rec.position, dtype=np.float64)
-    hp = butter(4, 0.3 * rec.sample_rate_hz, btype="highpass", fs=rec.sample_rate_hz,
-                output="sos")
-    noise = float(np.std(sosfiltfilt(hp, x)[20:-20])) / math.sqrt(0.4)
+    fs = parts[0].sample_rate_hz
+    x = np.concatenate([p.position for p in parts])
+    noise = float(np.std(np.concatenate([high_band(p.position, fs) for p in parts]))) \
+        / math.sqrt(0.4)
     travel = float(np.ptp(x))
     if travel <= MOTION_FACTOR * noise or travel == 0.0:
         raise DataError(f"{label}: the axis does not move (its position spans {travel:.3g} m, "
@@ -167,15 +170,19 @@ def _check_motion(rec: Recording, label: str) -> None:
                         "the axis moving under a varying thrust")
 
 
-def _check_rigid_excitation(rec: Recording, spec: FilterSpec, label: str) -> None:
+def _check_rigid_excitation(parts: list[Recording], spec: FilterSpec, label: str) -> None:
     """Acceleration and speed must not move in step: a constant-acceleration or
     constant-speed run cannot tell mass from damping."""
     from scipy.signal import butter, sosfiltfilt
 
-    sos = butter(spec.order, spec.cutoff_hz, fs=rec.sample_rate_hz, output="sos")
-    v = sosfiltfilt(sos, np.diff(rec.position) * rec.sample_rate_hz)[spec.edge:-spec.edge]
-    a = np.diff(v) * rec.sample_rate_hz
-    v = v[1:]
+    fs = parts[0].sample_rate_hz
+    sos = butter(spec.order, spec.cutoff_hz, fs=fs, output="sos")
+    vs, acc = [], []
+    for p in parts:  # within each part: nothing differentiated across a gap
+        vp = sosfiltfilt(sos, np.diff(p.position) * fs)[spec.edge:-spec.edge]
+        acc.append(np.diff(vp) * fs)
+        vs.append(vp[1:])
+    v, a = np.concatenate(vs), np.concatenate(acc)
     X = np.column_stack([np.ones(len(v)), v - v.mean(), a - a.mean()])
     scale = np.linalg.norm(X, axis=0)
     if np.any(scale[1:] <= 0):
@@ -190,12 +197,14 @@ def _check_rigid_excitation(rec: Recording, spec: FilterSpec, label: str) -> Non
             "multisine, PRBS or a positioning move)")
 
 
-def setup(rec: Recording) -> Setup:
-    """Filter, kinematic mode and loop of ``rec`` as :func:`.fit.segments` chooses them."""
-    spec = choose_filter(rec.speed, rec.sample_rate_hz)
-    fb = feedback_z(rec)
+def setup(rec: Parts) -> Setup:
+    """Filter, kinematic mode and loop of ``rec`` (or of its parts together) as
+    :func:`.fit.segments` chooses them."""
+    parts = as_parts(rec)
+    spec = choose_filter([p.speed for p in parts], parts[0].sample_rate_hz)
+    fb = feedback_z(parts)
     closed = fb > FEEDBACK_Z
-    return Setup(spec, kinematic_mode(rec, spec, closed), closed, fb)
+    return Setup(spec, kinematic_mode(parts, spec, closed), closed, fb)
 
 
 def rigid(mass: float, viscous: float, fs: float) -> Plant:
@@ -203,11 +212,12 @@ def rigid(mass: float, viscous: float, fs: float) -> Plant:
     return Plant(mass_kg=mass, viscous_n_per_mps=max(viscous, 0.0), sample_rate_hz=fs)
 
 
-def _crude(rec: Recording, su: Setup) -> Plant:
+def _crude(rec: Parts, su: Setup) -> Plant:
     """Step 1 of the module doc: ordinary least squares through an exactly linear inversion."""
-    fs = rec.sample_rate_hz
+    parts = as_parts(rec)
+    fs = parts[0].sample_rate_hz
     ref = Plant(mass_kg=1.0, viscous_n_per_mps=0.0, sample_rate_hz=fs)
-    d = equation_data(ref, rec, su.spec, su.mode, False)
+    d = equation_data_parts(ref, parts, su.spec, su.mode, False)
     cols = d.project(np.column_stack([d.a_raw, d.v_raw, np.ones(len(d.v)), d.friction()]))
     beta, _ = lstsq(cols, d.y)
     mass = 1.0 + float(beta[0])
@@ -229,12 +239,13 @@ def _sd(fit: Fit, k: int) -> float:
     return math.sqrt(max(float(fit.cov[k, k]), 0.0))
 
 
-def _converge(rec: Recording, su: Setup, ref: Plant, effects: tuple[Effect, ...],
+def _converge(rec: Parts, su: Setup, ref: Plant, effects: tuple[Effect, ...],
               ) -> tuple[Plant, Fit, EquationData, int]:
     """Step 2/4: move the rigid reference until the mass and viscous steps vanish."""
-    fs = rec.sample_rate_hz
+    parts = as_parts(rec)
+    fs = parts[0].sample_rate_hz
     for it in range(1, MAX_ITERATIONS + 1):
-        data = equation_data(ref, rec, su.spec, su.mode, su.closed)
+        data = equation_data_parts(ref, parts, su.spec, su.mode, su.closed)
         fit = joint_fit(effects, data)
         effects = fit.effects[len(RIGID):]
         dm, db = float(fit.beta[0]), float(fit.beta[1])
@@ -246,23 +257,28 @@ def _converge(rec: Recording, su: Setup, ref: Plant, effects: tuple[Effect, ...]
     raise AssertionError("unreachable")  # pragma: no cover
 
 
-def fit_physical(rec: Recording, validate: Recording | None = None,
+def fit_physical(rec: Recording | Excerpt, validate: Recording | Excerpt | None = None,
                  opts: FitOptions | None = None) -> PhysicalFit:
-    """The whole method of the module doc (``validate``: a held-out recording)."""
+    """The whole method of the module doc (``validate``: a held-out recording). A recording
+    longer than ``opts.max_samples`` is used in spans spread over it (an :class:`Excerpt`:
+    the spans already read)."""
     opts = opts or FitOptions()
-    su = setup(rec)
-    ref, fit, data, its = _converge(rec, su, _crude(rec, su), START_EFFECTS)
+    ex = excerpt_for(rec, opts.max_samples, opts.split if validate is None else None)
+    held = None if validate is None else excerpt_for(validate, opts.max_samples, None)
+    parts = ex.parts
+    su = setup(parts)
+    ref, fit, data, its = _converge(parts, su, _crude(parts, su), START_EFFECTS)
     effects: tuple[Effect, ...] = ()
     rounds = 0
     notes: list[str] = []
     while True:
         rounds += 1
         sel_ref = _reference_of(ref, fit)
-        segs = segments(sel_ref, rec, validate, opts.split)
+        segs = segments(sel_ref, ex, held, opts.split, opts.max_samples)
         ef = fit_effects(sel_ref, segs, opts)
         named_rigid = any(e.name in RIGID_NAMES for e in ef.final.effects)
         effects = tuple(e for e in ef.final.effects if e.name not in RIGID_NAMES)
-        ref, fit, data, n = _converge(rec, su, sel_ref, effects)
+        ref, fit, data, n = _converge(parts, su, sel_ref, effects)
         its += n
         moved = _moved(sel_ref, ref, fit)
         if rounds >= MAX_ROUNDS or not (moved or named_rigid):
@@ -270,7 +286,7 @@ def fit_physical(rec: Recording, validate: Recording | None = None,
     plant, std, more = plant_and_std(ref, fit)
     notes += more
     found = _found(ef, fit, ref)
-    final = segments(ref, rec, validate, opts.split)
+    final = segments(ref, ex, held, opts.split, opts.max_samples)
     est_joint = joint_fit(fit.effects[len(RIGID):], final.est)
     return PhysicalFit(plant, std, found, ref, fit, data, final, est_joint, ef, su, its,
                        rounds, tuple(notes))
