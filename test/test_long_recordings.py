@@ -262,6 +262,12 @@ def test_the_cli_says_what_part_of_a_long_bag_it_used(tmp_path: Path,
     assert "data used: 40 s of 60 s (20000 of 30000 samples) in 10 spans" in text
     used = json.loads(out.read_text())["method"]["data_used"]["recording"]
     assert used["spans"][0] == [0, 2000] and used["spans"][-1] == [28000, 30000]
+    # the report repeats the diagnosis on the same spans (read again from the bag)
+    assert main(["report", str(out), "--out", str(tmp_path / "rep"), "--quiet"]) == 0
+    page = (tmp_path / "rep" / "index.html").read_text()
+    assert "data used" in page and "20000 of 30000 samples" in page
+    assert "figures not drawn" not in page
+    assert (tmp_path / "rep" / "diagnose_residual_time.png").exists()
     with pytest.raises(SystemExit) as exc:
         main(["diagnose", "--plant", "x.yaml", "--real", str(bag), "--max-samples", "1000"])
     assert exc.value.code == 2

@@ -23,12 +23,28 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..core.discrepancy.result import DiagnoseResult
 from .base import Plot, new_figure, styled
 
+FloatArray = NDArray[np.float64]
+
 POSITION_EFFECTS = ("cogging", "thrust_ripple", "spring")
 VELOCITY_EFFECTS = ("coulomb_friction", "stribeck_friction", "viscous_error", "force_offset")
+
+
+def _gapped(t: FloatArray, *ys: FloatArray) -> tuple[FloatArray, ...]:
+    """The series with a NaN at every gap between the spans of a long recording (a jump in
+    time of more than five steps), so that no line is drawn across it."""
+    t = np.asarray(t, dtype=np.float64)
+    if len(t) < 3:
+        return (t, *ys)
+    dt = np.diff(t)
+    at = np.flatnonzero(dt > 5.0 * float(np.median(dt))) + 1
+    if not len(at):
+        return (t, *ys)
+    return tuple(np.insert(np.asarray(s, dtype=np.float64), at, np.nan) for s in (t, *ys))
 
 
 @styled
@@ -40,8 +56,9 @@ def residual_time(result: DiagnoseResult) -> Plot:
     axes = np.atleast_1d(fig.subplots(len(segs), 1, squeeze=False)[:, 0])
     data: dict[str, Any] = {}
     for ax, seg in zip(axes, segs, strict=True):
-        (b,) = ax.plot(c.t[seg], c.before[seg], color="0.6", label="nominal plant")
-        (a,) = ax.plot(c.t[seg], c.after[seg], color="k", label="corrected")
+        t, before, after = _gapped(c.t[seg], c.before[seg], c.after[seg])
+        (b,) = ax.plot(t, before, color="0.6", label="nominal plant")
+        (a,) = ax.plot(t, after, color="k", label="corrected")
         ax.set_ylabel("force residual (N)")
         ax.set_title(f"{seg} data")
         ax.legend(loc="upper right")

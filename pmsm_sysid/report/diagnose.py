@@ -123,8 +123,12 @@ def where_table(d: Mapping[str, Any]) -> Table:
 
 def json_sections(d: Mapping[str, Any]) -> list[Section]:
     mism = d.get("mismatch") or {}
+    used = [(f"data used{'' if k == 'recording' else ' (held-out recording)'}", u["text"])
+            for k, u in ((d.get("method") or {}).get("data_used") or {}).items()
+            if not u.get("whole", True)]
     summary: list[Block] = [Facts((("NRMSE before", _v(mism.get("nrmse_before"))),
-                                   ("effects found", str(len(d.get("effects") or []))))),
+                                   ("effects found", str(len(d.get("effects") or []))),
+                                   *used)),
                             where_table(d)]
     if not d.get("effects"):
         summary.append(Note("no significant missing physics"))
@@ -163,7 +167,7 @@ def _same(d: Mapping[str, Any], again: Mapping[str, Any]) -> bool:
 def rerun(d: Mapping[str, Any], json_path: Path) -> tuple[Any, str]:
     """(DiagnoseResult, "") when the diagnosis can be repeated as the JSON describes it,
     else (None, why not)."""
-    from ..bagio import read_recording
+    from ..bagio.spans import read_excerpt
     from ..core.discrepancy import DiagnoseOptions, diagnose
     from ..core.physics.plant import plant_from_dict
 
@@ -179,20 +183,24 @@ def rerun(d: Mapping[str, Any], json_path: Path) -> tuple[Any, str]:
     defaults = DiagnoseOptions()
     opts = DiagnoseOptions(alpha=float(method.get("alpha", defaults.alpha)),
                            min_share=float(method.get("min_share", defaults.min_share)),
-                           replay=replay)
+                           replay=replay,
+                           max_samples=int(method.get("max_samples", defaults.max_samples)))
+
+    def read(path: Path, split: float | None) -> Any:  # the spans the diagnosis used
+        return read_excerpt(path, max_samples=opts.max_samples, split=split)
+
+    split = None if val else opts.split
     sim = _find(d.get("sim"), json_path)
     if d.get("reference") == "sim_recording" and sim is None:
         return None, f"the simulator's recording {d.get('sim')!r} is not there"
     try:
-        held = read_recording(val).recording if val else None
+        held = read(val, None) if val else None
         if sim is not None:
             from ..core.discrepancy.against import diagnose_sim
 
-            result = diagnose_sim(read_recording(sim).recording,
-                                  read_recording(real).recording, held, opts)
+            result = diagnose_sim(read(sim, opts.split), read(real, split), held, opts)
         else:
-            result = diagnose(plant_from_dict(d["plant"]), read_recording(real).recording,
-                              held, opts)
+            result = diagnose(plant_from_dict(d["plant"]), read(real, split), held, opts)
     except (PmsmSysidError, KeyError, TypeError, ValueError) as exc:
         return None, f"the diagnosis could not be repeated ({exc})"
     if not _same(d, result.to_dict()):

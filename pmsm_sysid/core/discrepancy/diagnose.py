@@ -192,7 +192,7 @@ def _method(segs: Segments, opts: DiagnoseOptions, n_tests: float,
         "alpha": opts.alpha, "min_share": opts.min_share, "tests_searched": n_tests,
         "significance": "-log10 of the Bonferroni-corrected p-value (prewhitened F-test)",
         "sign_smoothing_mps": segs.est.sign_smoothing_mps,
-        "data_used": segs.used,
+        "data_used": segs.used, "max_samples": opts.max_samples,
     }
 
 

@@ -140,7 +140,7 @@ def method(pf: PhysicalFit, opts: FitOptions, has_validate: bool) -> dict[str, A
         "iterations": pf.iterations, "selection_rounds": pf.rounds,
         "alpha": opts.alpha, "min_share": opts.min_share,
         "sample_rate_hz": 1.0 / d.period,
-        "data_used": pf.segs.used,
+        "data_used": pf.segs.used, "max_samples": opts.max_samples,
     }
 
 
