@@ -80,11 +80,8 @@ def _excerpt(data: RecordingLike, label: str, namespace: str | None, max_samples
     if isinstance(data, (str, os.PathLike)):
         from .recordings import load_excerpt
 
-        if joint is not None:
-            rec = _recording(data, label, namespace, joint)
-            return excerpt_of(rec, plan_spans(len(rec), max_samples, split))
-
-        return load_excerpt(data, namespace, max_samples=max_samples, split=split)
+        return load_excerpt(data, namespace, max_samples=max_samples, split=split, joint=joint,
+                            use="diagnose")
     raise OptionError(f"{label} must be a Recording or a bag path, got {type(data).__name__}")
 
 

@@ -34,15 +34,20 @@ def load_bag(path: PathLike, namespace: str | None = None,
 
 
 def load_excerpt(path: PathLike, namespace: str | None = None, *, max_samples: int,
-                 split: float | None = None) -> Excerpt:
+                 split: float | None = None, joint: str | None = None,
+                 use: str | None = None) -> Excerpt:
     """The spans of a bag that a fit within ``max_samples`` uses (all of it when it fits),
-    read without reading the rest (:func:`pmsm_sysid.bagio.spans.read_excerpt`)."""
+    read without reading the rest (:func:`pmsm_sysid.bagio.spans.read_excerpt`); ``use``:
+    what they are for (a non-finite sample in them is then refused)."""
     from ..bagio.spans import read_excerpt
     from ..validate import check_namespace
 
     if namespace is not None:
         check_namespace(namespace, "namespace")
-    return read_excerpt(Path(path), namespace=namespace, max_samples=max_samples, split=split)
+    if joint is not None and not (isinstance(joint, str) and joint):
+        raise OptionError(f"joint must be a joint name, got {joint!r}")
+    return read_excerpt(Path(path), namespace=namespace, max_samples=max_samples, split=split,
+                        joint_name=joint, use=use)
 
 
 def read_bag(path: PathLike, namespace: str | None = None, *,

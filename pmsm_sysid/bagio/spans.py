@@ -13,6 +13,7 @@ messages. Each span is aligned on its own (:func:`.read.read_recording`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -21,8 +22,8 @@ from ..core.errors import BagError, DataError
 from ..core.recording.signals import Recording
 from ..core.recording.spans import MAX_SAMPLES, Excerpt, excerpt_of, join, plan_spans
 from .cdr import decode_stamped
-from .common import open_reader, typestore
-from .read import Window, _choose_layout, _stamp_ns, read_recording
+from .common import LoadedRecording, open_reader, typestore
+from .read import Window, _choose_layout, _stamp_ns, check_all_finite, read_recording
 
 #: Log-time margin around a span (ns): the recorder's delay between stamp and log time.
 MARGIN_NS = 2_000_000_000
@@ -54,16 +55,28 @@ def _extent(path: Path, namespace: str | None) -> tuple[int, int, int, int]:
         last = max((_stamp(conn, data) for conn, _, data in tail), default=stamp0)
         return count, stamp0, int(first[1]), last
 def read_excerpt(path: str | Path, *, namespace: str | None = None,
-                 max_samples: int = MAX_SAMPLES, split: float | None = None) -> Excerpt:
+                 max_samples: int = MAX_SAMPLES, split: float | None = None,
+                 joint_name: str | None = None, use: str | None = None) -> Excerpt:
     """The spans of the bag at ``path`` that :func:`plan_spans` chooses, read apart.
 
     A bag within ``max_samples`` is read whole (:func:`.read.read_recording`). ``split``:
     the end of the recording is held out (spans planned on each side of the cut).
+    ``joint_name``: the axis's joint of a JointState recording. ``use`` (what the samples
+    are for, e.g. ``diagnose``): a non-finite sample in what is read is refused
+    (:func:`.read.check_all_finite`); None: dropped, as on any read.
     """
     path = Path(path)
+
+    def read(window: Window | None) -> LoadedRecording:
+        loaded = read_recording(path, namespace=namespace, joint_name=joint_name,
+                                window=window)
+        if use is not None:
+            check_all_finite(loaded, f"recording {path}", use)
+        return loaded
+
     count, stamp0, log0, stamp1 = _extent(path, namespace)
     if count <= max_samples or stamp1 <= stamp0:
-        whole = read_recording(path, namespace=namespace).recording
+        whole = read(None).recording
         return excerpt_of(whole, plan_spans(len(whole), max_samples, split))
     period = (stamp1 - stamp0) / (count - 1)  # ns per sample
     parts = []
@@ -72,22 +85,26 @@ def read_excerpt(path: str | Path, *, namespace: str | None = None,
         hi = stamp0 + round((b - 0.5) * period)
         shift = log0 - stamp0
         window: Window = (lo + shift - MARGIN_NS, hi + shift + MARGIN_NS, lo, hi)
-        got = _span(path, namespace, window)
+        got = _span(read, window)
         if got is None or len(got) < MIN_SHARE * (b - a):  # log times far from the stamps:
-            whole_scan: Window = (None, None, lo, hi)  # scan the bag, keep the span
-            got = read_recording(path, namespace=namespace, window=whole_scan).recording
+            got = read((None, None, lo, hi)).recording  # scan the bag, keep the span
         rec = got
         start = round((rec.t[0] * 1e9 - stamp0) / period)
         parts.append((rec, max(0, min(int(start), count - len(rec)))))
     return join(parts, count)
 
 
-def _span(path: Path, namespace: str | None, window: Window) -> Recording | None:
+def _span(read: Callable[[Window | None], LoadedRecording],
+          window: Window) -> Recording | None:
     """The aligned samples of one span read through the time index, or None if too few
-    were logged within its window to align."""
+    were logged within its window to align (a refused non-finite sample stays refused)."""
     try:
-        return read_recording(path, namespace=namespace, window=window).recording
-    except (BagError, DataError):
+        return read(window).recording
+    except BagError:
+        return None
+    except DataError as exc:
+        if "non-finite" in str(exc):
+            raise
         return None
 
 
