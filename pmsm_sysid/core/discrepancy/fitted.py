@@ -27,8 +27,8 @@ from ..plantfit.physical import PhysicalFit, fit_physical
 from ..plantfit.stats import nrmse
 from ..recording.signals import Recording
 from ..recording.spans import Excerpt
-from .result import used_lines
 from .showfit import scan_unexplained
+from .words import used_lines
 
 
 @dataclass(frozen=True)

@@ -16,22 +16,12 @@ from numpy.typing import NDArray
 from ..physics.plant import Plant, plant_to_dict
 from ..plantfit.found import FoundEffect, effect_line
 from .locate import AxisFinding
-from .words import unexplained_text, where_text
+from .words import unexplained_text, used_lines, where_text
 
 if TYPE_CHECKING:
     from .sidebyside import SimComparison
 
 FloatArray = NDArray[np.float64]
-
-def used_lines(method: dict[str, Any]) -> list[str]:
-    """'data used: ...' for each recording of which spans were used (none when whole)."""
-    out = []
-    for key, used in (method.get("data_used") or {}).items():
-        if not used.get("whole", True):
-            label = "" if key == "recording" else " (held-out recording)"
-            out.append(f"data used{label}: {used['text']}")
-    return out
-
 
 @dataclass(frozen=True)
 class Curves:

@@ -89,3 +89,13 @@ def where_text(where: Sequence[Any], min_significance: float = 3.0) -> str:
     rows.sort(key=lambda r: -r[1])
     rows = rows[:1] + [r for r in rows[1:] if r[1] >= 0.005]  # nothing that rounds to +0 %
     return ", ".join(f"{a} {'+' if i else ''}{100 * s:.0f} %" for i, (a, s) in enumerate(rows))
+
+
+def used_lines(method: dict[str, Any]) -> list[str]:
+    """'data used: ...' for each recording of which spans were used (none when whole)."""
+    out = []
+    for key, used in (method.get("data_used") or {}).items():
+        if not used.get("whole", True):
+            label = "" if key == "recording" else " (held-out recording)"
+            out.append(f"data used{label}: {used['text']}")
+    return out
