@@ -34,13 +34,16 @@ from rclpy.parameter import Parameter
 
 from .core.errors import PmsmSysidError
 from .core.physics.plant import Plant
+from .diagnosed import diagnosis_summary, run_history
 from .topics import DEFAULT_NAMESPACE
 
-NODES = ("sim", "identifier", "gfrf")
+NODES = ("sim", "identifier", "gfrf", "diagnose")
+DEFAULT_NODES = ("sim", "identifier", "gfrf")  # the diagnosis needs a reference: added on demand
 BACKLOG = 200  # samples the sim may run ahead of the identifier under back-pressure
 RECORD_BACKLOG = 2000  # ... and ahead of the recorder (it queues 10000 per topic)
 MATCH_S = 30.0  # how long to wait for the recorder process to match the publishers
 SETTLE_S = 5.0  # after the sim's last sample, how long the identifier may still take
+DIAGNOSE_WAIT_S = 300.0  # at the end, how long an outstanding diagnosis may still take
 
 
 def parse_nodes(text: str | Sequence[str]) -> tuple[str, ...]:
@@ -87,9 +90,18 @@ class Pipeline:
         return self.nodes.get("gfrf")
 
     @property
+    def diagnose(self) -> Any:
+        return self.nodes.get("diagnose")
+
+    @property
+    def consumers(self) -> list[Any]:
+        """The engines of this process that take the sim's samples (identifier, diagnosis)."""
+        return [n.engine for n in (self.identifier, self.diagnose) if n is not None]
+
+    @property
     def stepped(self) -> bool:
         """True when this pipeline steps the simulator itself (sim clock, back-pressure)."""
-        return self.clock == "sim" and self.sim is not None and self.identifier is not None
+        return self.clock == "sim" and self.sim is not None and bool(self.consumers)
 
     def run(self, duration_s: float | None = None,
             until: Callable[[], bool] | None = None) -> None:
@@ -122,8 +134,7 @@ class Pipeline:
             self.executor.spin_once(timeout_sec=0.0 if self.stepped else 0.05)
 
     def _caught_up(self) -> bool:
-        ident = self.identifier
-        return ident is None or bool(ident.engine.samples_received >= self.sim.published)
+        return all(e.samples_received >= self.sim.published for e in self.consumers)
 
     def _gfrf_caught_up(self) -> bool:
         """The identifier has fitted and published everything, and the GFRF node has
@@ -133,22 +144,24 @@ class Pipeline:
                     and g.worker.stats.processed + g.queue.skipped >= g.received)
 
     def _step_sim(self, limit: int | None) -> None:
-        """Publish the next burst unless the identifier (or the recorder) is behind (the
-        GFRF node analyses the newest models and counts what it skips; with
-        ``gfrf_every_model`` the sim waits for it too). At most ``hop``
-        samples are in flight (published, not yet taken by the identifier) and none is
-        published while a window waits for the fitting worker, so at most one window
-        becomes due per burst and none is ever skipped."""
-        sim, ident = self.sim, self.identifier
-        backlog = sim.published - ident.engine.samples_received
-        busy = ident.engine.windows_waiting > 0
-        if self.gfrf_every_model and self.gfrf is not None:
+        """Publish the next burst unless the identifier, the diagnosis (or the recorder) is
+        behind (the GFRF node analyses the newest models and counts what it skips; with
+        ``gfrf_every_model`` the sim waits for it too). At most ``hop`` samples are in
+        flight (published, not yet taken by the identifier or the diagnosis) and none is
+        published while a window or a span waits for its worker, so at most one becomes due
+        per burst and none is ever skipped."""
+        sim, engines = self.sim, self.consumers
+        backlog = sim.published - min(e.samples_received for e in engines)
+        busy = any(e.windows_waiting > 0 for e in engines)
+        if self.gfrf_every_model and self.gfrf is not None and self.identifier is not None:
             busy = busy or not self._gfrf_caught_up()
         if self.recorder is not None:
             busy = busy or sim.published - self.recorder.samples_recorded >= RECORD_BACKLOG
-        room = min(BACKLOG, ident.engine.config.hop) - backlog
+        room = min(BACKLOG, *(e.config.hop for e in engines)) - backlog
         if limit is not None:
             room = min(room, limit - sim.published)
+        if self.identifier is not None:  # a pause of the sim here is not stale input
+            self.identifier.hold_input(busy)
         if room > 0 and not busy:
             sim.step(max(room, 0))
 
@@ -173,15 +186,28 @@ class Pipeline:
             self._spin_while(lambda: not (g.received >= want and g.worker.stats.processed
                                           + g.queue.skipped >= g.received), timeout_s)
             g.publish_results()
+        self.finish_diagnosis(max(timeout_s, DIAGNOSE_WAIT_S))
         col = self.nodes.get("collector")
         if col is not None:
             models = ident.models_published if ident is not None else 0
             ridges = g.published if g is not None else 0
+            diagnoses = self.diagnose.published if self.diagnose is not None else 0
             self._spin_while(lambda: col.counts["model"] < models
-                             or col.counts["ridges"] < ridges, min(timeout_s, 5.0))
+                             or col.counts["ridges"] < ridges
+                             or col.counts["diagnosis"] < diagnoses, min(timeout_s, 5.0))
         self.executor.spin_once(timeout_sec=0.05)
         if self.recorder is not None:
             self.finish_recording(timeout_s)
+
+    def finish_diagnosis(self, timeout_s: float = DIAGNOSE_WAIT_S) -> None:
+        """Diagnose a span the last samples completed, wait for the diagnosis in progress
+        (at most ``timeout_s``) and publish what is finished."""
+        d = self.diagnose
+        if d is None:
+            return
+        d.engine.flush()
+        d.engine.wait_idle(timeout_s)
+        d.publish_results()
 
     def finish_recording(self, timeout_s: float = 30.0) -> None:
         """Wait until the recorder holds every sample published (or received) here and has
@@ -225,6 +251,11 @@ def _make_node(name: str, ctx: Context, opts: dict[str, Any]) -> Node:
 
         return IdentifierNode(context=ctx, namespace=opts["namespace"],
                               parameter_overrides=overrides(opts["identifier_params"]))
+    if name == "diagnose":
+        from .nodes.diagnosis_node import DiagnosisNode
+
+        return DiagnosisNode(context=ctx, namespace=opts["namespace"],
+                             parameter_overrides=overrides(opts["diagnose_params"]))
     from .nodes.gfrf_node import GfrfNode
 
     n_outputs = len((opts["identifier_params"] or {}).get("outputs", ("speed", "position")))
@@ -251,12 +282,13 @@ def _make_checked(name: str, ctx: Context, opts: dict[str, Any]) -> Node:
 
 @contextmanager
 def build_pipeline(
-    nodes: Sequence[str] = NODES, *, plant: Plant | None = None,
+    nodes: Sequence[str] = DEFAULT_NODES, *, plant: Plant | None = None,
     excitation: str = "paper-speed", seed: int = 0, clock: str = "wall", rate: float = 1.0,
     namespace: str = DEFAULT_NAMESPACE, record: str | None = None,
     identifier_params: Mapping[str, Any] | None = None,
     sim_params: Mapping[str, Any] | None = None, gfrf_params: Mapping[str, Any] | None = None,
-    context: Context | None = None, domain_id: int | None = None, wait_s: float = 0.0,
+    diagnose_params: Mapping[str, Any] | None = None, context: Context | None = None,
+    domain_id: int | None = None, wait_s: float = 0.0,
     subscribers: int = 1, ros_args: Sequence[str] | None = None,
     gfrf_every_model: bool = False,
 ) -> Iterator[Pipeline]:
@@ -270,18 +302,23 @@ def build_pipeline(
     arguments apply. The keyword arguments here win over them.
     ``gfrf_every_model``: under the stepped sim clock, also wait for the GFRF node, so it
     analyses every model (slower: an analysis costs more than a fit).
+    ``diagnose_params``: the diagnosis node's parameters (``plant_file`` or
+    ``sim_namespace``, ``period_s``, ``span_s``, ...); under the stepped sim clock the sim
+    also waits for it, so no span is skipped.
     """
     from .rosutil import check_namespace, ros_session
 
     namespace = check_namespace(namespace)
-    # the identifier last: its input subscriptions appear just before the executor spins
-    names = tuple(sorted(parse_nodes(nodes), key=lambda n: n == "identifier"))
+    # the input subscribers last (the identifier last of all): their subscriptions appear
+    # just before the executor spins
+    names = tuple(sorted(parse_nodes(nodes),
+                         key=lambda n: (n == "identifier", n == "diagnose")))
     if clock not in ("wall", "sim"):
         raise PmsmSysidError(f"clock must be 'wall' or 'sim', got '{clock}'")
     opts = {"plant": plant, "excitation": excitation, "seed": seed, "namespace": namespace,
             "clock": clock, "rate": rate if clock == "sim" else 1.0,
             "identifier_params": identifier_params, "sim_params": sim_params,
-            "gfrf_params": gfrf_params}
+            "gfrf_params": gfrf_params, "diagnose_params": diagnose_params}
     if ros_args and context is not None:
         raise PmsmSysidError("ros_args apply to a context this pipeline creates, not to a "
                              "given one (pass them to rclpy.init of that context)")
@@ -289,7 +326,7 @@ def build_pipeline(
         made: dict[str, Any] = {}
         pipe = Pipeline(ctx, executor, made, clock, gfrf_every_model=gfrf_every_model)
         try:
-            if "identifier" in names or "gfrf" in names:
+            if {"identifier", "gfrf", "diagnose"} & set(names):
                 from .nodes.collector import ResultCollector
 
                 made["collector"] = ResultCollector(context=ctx, namespace=namespace)
@@ -435,13 +472,14 @@ def pipeline_summary(pipe: Pipeline) -> dict[str, Any]:
         "change_events": (list(ident.last["changes"]) if ident is not None
                           else list(col.changes) if col is not None else []),
         "errors": list(ident.errors) if ident is not None else [],
-        "history": col.history.to_dict() if col is not None else None,
+        "history": run_history(col),
         "inputs": ident.input_report().to_dict() if ident is not None else None,
         "speed_derived": ident.engine.aligner.speed_derived if ident is not None else None,
     })
     if gfrf is not None:
         g = gfrf.summary()
         out["gfrf"] = {k: v for k, v in g.items() if not k.startswith("last_")}
+    out.update(diagnosis_summary(pipe.diagnose, col))
     if pipe.recorder is not None:
         out.update(record_summary(pipe))
     return out

@@ -33,13 +33,14 @@ RIDGES = "ridges"                        # std_msgs/msg/String, gfrf JSON
 RIDGE_FREQUENCIES = "ridge_frequencies"  # std_msgs/msg/Float64MultiArray
 VALIDATION = "validation"                # diagnostic_msgs/msg/DiagnosticArray
 CHANGE = "change"                        # diagnostic_msgs/msg/DiagnosticArray
+DIAGNOSIS = "diagnosis"                  # std_msgs/msg/String, diagnose JSON of each span
 
 STRING_TYPE = "std_msgs/msg/String"
 DIAGNOSTIC_ARRAY_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 OUTPUT_TYPES = {
     MODEL: STRING_TYPE, RIDGES: STRING_TYPE,
     RIDGE_FREQUENCIES: "std_msgs/msg/Float64MultiArray",
-    VALIDATION: DIAGNOSTIC_ARRAY_TYPE, CHANGE: DIAGNOSTIC_ARRAY_TYPE,
+    VALIDATION: DIAGNOSTIC_ARRAY_TYPE, CHANGE: DIAGNOSTIC_ARRAY_TYPE, DIAGNOSIS: STRING_TYPE,
 }
 
 #: The standard health topic (absolute: the diagnostic aggregator listens there).
@@ -65,6 +66,42 @@ STAT_TOPICS: dict[str, tuple[str, str, str]] = {
                              "H2/H3 ridges of the newest analysed model, in the order of "
                              "ridge_frequencies' rows"),
 }
+
+
+# --- plottable numbers of the live diagnosis: ``stats/diagnosis/<quantity>`` (relative) -----
+DIAGNOSIS_STATS = "diagnosis"
+#: effect -> (param, unit) published per diagnosis as ``stats/diagnosis/<effect>/<param>``
+#: (NaN while the effect is not named; names and signs of the diagnose JSON); the first is
+#: the effect's headline number.
+DIAGNOSIS_PARAMS: dict[str, tuple[tuple[str, str], ...]] = {
+    "coulomb_friction": (("amplitude_n", "N"),),
+    "stribeck_friction": (("static_n", "N"), ("velocity_mps", "m/s")),
+    "cogging": (("amplitude_n", "N"), ("pitch_m", "m"), ("phase_rad", "rad")),
+    "thrust_ripple": (("relative", "1"), ("pitch_m", "m"), ("phase_rad", "rad")),
+    "force_offset": (("amplitude_n", "N"),),
+    "thrust_lag": (("tau_s", "s"),),
+    "transport_delay": (("delay_s", "s"),),
+    "spring": (("stiffness_n_per_m", "N/m"),),
+    "mass_error": (("mass_kg", "kg"),),
+    "viscous_error": (("viscous_n_per_mps", "N/(m/s)"),),
+}
+#: quantity -> (type, unit, what it is): the counts and fit of each diagnosis
+DIAGNOSIS_COUNTS: dict[str, tuple[str, str, str]] = {
+    "effects_named": (INT32_TYPE, "count", "library effects the latest diagnosis named"),
+    "unexplained": (INT32_TYPE, "count", "mismatches no library effect explains (reported "
+                    "as unexplained, with the axis they live on)"),
+    "force_nrmse_before": (FLOAT64_TYPE, "1", "force NRMSE of the plant on the held-out last "
+                           "30 % of the span (equation error of the inverse dynamics)"),
+    "force_nrmse_after": (FLOAT64_TYPE, "1", "the same with the named effects added"),
+}
+
+
+def diagnosis_stat_topics() -> dict[str, str]:
+    """Relative name -> type of every plottable number of the live diagnosis."""
+    out = {f"{STATS}/{DIAGNOSIS_STATS}/{q}": t for q, (t, _, _) in DIAGNOSIS_COUNTS.items()}
+    out.update({f"{STATS}/{DIAGNOSIS_STATS}/{e}/{p}": FLOAT64_TYPE
+                for e, params in DIAGNOSIS_PARAMS.items() for p, _ in params})
+    return out
 
 
 def normalize_namespace(namespace: str) -> str:

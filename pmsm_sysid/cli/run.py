@@ -20,7 +20,8 @@ from .common import (
 #: Most samples per fit window (200 s at 500 Hz).
 MAX_WINDOW = 100_000
 
-HELP = "run the sim motor, identifier and GFRF nodes in one process (live pipeline)"
+HELP = ("run the sim motor, identifier and GFRF nodes (and a live diagnosis) in one process "
+        "(live pipeline)")
 #: Output options, checked before any work starts (see common.check_outputs).
 OUTPUTS = {"json": "file", "record": "bag", "report": "report"}
 
@@ -30,6 +31,9 @@ examples:
   pmsm-sysid run --clock sim --duration 30 --json -       # 30 s of data, as fast as it fits
   pmsm-sysid run --nodes sim --clock sim --wait 30        # motor side only (other host)
   pmsm-sysid run --nodes identifier,gfrf --duration 60    # identification side only
+  pmsm-sysid run --nodes identifier,gfrf --diagnose my_sim.yaml   # a real drive on /pmsm,
+                                          # diagnosed against the plant file every 10 s
+  pmsm-sysid run --nodes identifier --diagnose-sim /twin  # ... against a simulator on /twin
 The default excitation and plant are what the identifier's structure needs: broadband
 thrust is persistently exciting for the 40 input lags, so the models hold for any input in
 its band. The paper's single tones (paper-speed, paper-position) reproduce Liu et al.: the
@@ -43,6 +47,13 @@ its windows together: the correlation tests reject a correct model in about 1 wi
 by chance, so the output fails only when its windows fail significantly more often than
 that (one-sided binomial test at 1 %) or its latest free run fails; a chance failure of the
 latest window is named as a detail of a pass.
+--diagnose PLANT.yaml adds the live diagnosis: every diagnose.period_s (10 s of data) the
+latest diagnose.span_s (30 s) of the inputs are diagnosed in a worker process, as
+`pmsm-sysid diagnose --plant PLANT.yaml` would on a recording of them (the last 30 % held
+out); the result goes to <ns>/diagnosis, the effects' numbers to <ns>/stats/diagnosis/...,
+the state to /diagnostics (WARN while physics the plant lacks is present).
+--diagnose-sim NAMESPACE does the same against a simulator publishing its own thrust, speed
+and position under NAMESPACE, beside the drive (its latest span, aligned the same way).
 --duration counts seconds of data (duration x 500 samples) when the sim node runs in this
 process, in either clock; wall-clock seconds otherwise. Without it the run lasts until
 Ctrl-C or SIGTERM, which stop it cleanly (results flushed, recording finalised).
@@ -93,9 +104,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--method", choices=("iofr", "ofr"), default=None,
                    help="term selection of the identifier (default ofr)")
     p.add_argument("--outputs", default=None, help="identified outputs (default speed,position)")
+    ref = p.add_mutually_exclusive_group()
+    ref.add_argument("--diagnose", metavar="PLANT.yaml",
+                     help="add the live diagnosis against this plant file (or packaged plant "
+                          "name): every diagnose.period_s, the latest diagnose.span_s of the "
+                          "inputs (see below)")
+    ref.add_argument("--diagnose-sim", metavar="NAMESPACE", type=ros_name,
+                     help="add the live diagnosis against a simulator publishing its own "
+                          "thrust, speed and position under NAMESPACE")
     p.add_argument("--set", action="append", default=[], metavar="NODE.PARAM=VALUE",
                    help="any node parameter, e.g. identifier.speed.terms=10, "
-                        "sim.cogging.enabled=true, gfrf.orders=[1,2] (repeatable)")
+                        "sim.cogging.enabled=true, gfrf.orders=[1,2], diagnose.period_s=5 "
+                        "(repeatable)")
 
 
 def _value(text: str) -> Any:
@@ -111,7 +131,7 @@ def node_params(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
     """Per-node parameter overrides from the options and ``--set``."""
     from ..core.errors import PmsmSysidError
 
-    out: dict[str, dict[str, Any]] = {"sim": {}, "identifier": {}, "gfrf": {}}
+    out: dict[str, dict[str, Any]] = {"sim": {}, "identifier": {}, "gfrf": {}, "diagnose": {}}
     ident = out["identifier"]
     for key in ("window", "hop", "method"):
         if getattr(args, key) is not None:
@@ -124,10 +144,50 @@ def node_params(args: argparse.Namespace) -> dict[str, dict[str, Any]]:
         name, sep, text = item.partition("=")
         node, dot, param = name.partition(".")
         if not sep or not dot or node not in out or not param:
-            raise PmsmSysidError(f"--set takes NODE.PARAM=VALUE with NODE sim, identifier or gfrf "
-                             f"(got '{item}')")
+            raise PmsmSysidError(f"--set takes NODE.PARAM=VALUE with NODE sim, identifier, gfrf "
+                                 f"or diagnose (got '{item}')")
         out[node][param] = _value(text)
+    if args.diagnose is not None:
+        out["diagnose"]["plant_file"] = args.diagnose
+    if args.diagnose_sim is not None:
+        out["diagnose"]["sim_namespace"] = args.diagnose_sim
     return out
+
+
+def _with_diagnosis(nodes: tuple[str, ...], args: argparse.Namespace,
+                    params: dict[str, Any]) -> tuple[str, ...]:
+    """The nodes with the diagnosis when asked for; its reference checked (one line, exit
+    2) before any node starts."""
+    from ..core.errors import PmsmSysidError
+    from ..core.physics.plant import load_plant
+    from ..nodes.diagnosis_node import DEFAULTS
+    from ..topics import normalize_namespace
+
+    for key, value in params.items():  # --set diagnose.period_s=5 means 5.0 s
+        if isinstance(DEFAULTS.get(key), float) and type(value) is int:
+            params[key] = float(value)
+    given = params.get("plant_file") or params.get("sim_namespace")
+    if not given:
+        if "diagnose" in nodes or params:
+            raise PmsmSysidError("the diagnosis needs a reference: --diagnose PLANT.yaml or "
+                                 "--diagnose-sim NAMESPACE")
+        return nodes
+    if params.get("plant_file") and params.get("sim_namespace"):
+        raise PmsmSysidError("--diagnose and --diagnose-sim exclude each other: the "
+                             "diagnosis has one reference")
+    if params.get("plant_file"):
+        load_plant(str(params["plant_file"]))
+    else:
+        from ..nodes.diagnosis_work import diagnose_takes_sim
+
+        ns = normalize_namespace(str(params["sim_namespace"]))
+        if ns == normalize_namespace(args.namespace):
+            raise PmsmSysidError(f"--diagnose-sim {ns}: that is the drive's own namespace "
+                                 "(--namespace); the simulator must publish under another one")
+        if not diagnose_takes_sim():
+            raise PmsmSysidError("--diagnose-sim: this version of diagnose cannot compare "
+                                 "with a simulator's recording; give --diagnose PLANT.yaml")
+    return tuple(dict.fromkeys([*nodes, "diagnose"]))
 
 
 def _check(args: argparse.Namespace) -> None:
@@ -160,6 +220,7 @@ def run(args: argparse.Namespace) -> int:
     _check(args)
     nodes = parse_nodes(args.nodes)
     params = node_params(args)
+    nodes = _with_diagnosis(nodes, args, params["diagnose"])
     plant = load_plant(args.plant)
     if args.record:
         replace_bag_dir(Path(args.record), args.force)  # checked at the start: ours to replace
@@ -168,7 +229,8 @@ def run(args: argparse.Namespace) -> int:
                         record=args.record, wait_s=args.wait, subscribers=args.subscribers,
                         ros_args=getattr(args, "ros_args", None),
                         identifier_params=params["identifier"],
-                        sim_params=params["sim"], gfrf_params=params["gfrf"]) as pipe, \
+                        sim_params=params["sim"], gfrf_params=params["gfrf"],
+                        diagnose_params=params["diagnose"]) as pipe, \
             stop_on_signals(pipe.stop):
         print(f"pmsm-sysid run: running {', '.join(nodes)} (Ctrl-C to stop)", file=sys.stderr,
               flush=True)

@@ -17,7 +17,9 @@ models, no change event, nothing dropped or skipped. ``FAIL``: a fit failed, the
 lost samples, an output's latest free run diverged or fell below ``min_r2``, or its windows
 failed significantly more often than 1 in 20. ``warning``: everything else that is not a
 pass, named (a failed window among too few to judge, data-check warnings, change events,
-dropped samples, skipped windows, an input problem, an output not validated yet).
+dropped samples, skipped windows, an input problem, an output not validated yet, and with
+the live diagnosis: physics its latest span found missing from the reference, spans skipped
+or not diagnosed).
 """
 
 from __future__ import annotations
@@ -143,6 +145,7 @@ def verdict(s: dict[str, Any]) -> dict[str, Any]:
                        ("windows_skipped", "windows skipped")):
         if s.get(key):
             warnings.append(f"{s[key]} {label}")
+    warnings += diagnosis_warnings(s)
     if not names and s.get("samples_received") is not None:
         warnings.append("no model fitted yet")
     if not names and not failures and not warnings:  # no identifier in this process
@@ -151,6 +154,37 @@ def verdict(s: dict[str, Any]) -> dict[str, Any]:
         status = "FAIL" if failures else "warning" if warnings else "pass"
     return {"status": status, "failures": failures, "warnings": warnings, "outputs": outputs,
             "windows": windows}
+
+
+def diagnosis_warnings(s: dict[str, Any]) -> list[str]:
+    """What the live diagnosis found missing in its latest span, and the spans it could not
+    diagnose (skipped to keep up, or failed)."""
+    from ..diagnosed import effects, found_text
+
+    out = []
+    last = s.get("last_diagnosis")
+    if last and effects(last):
+        lacks = "the simulation" if last.get("reference") == "sim_recording" else "the plant"
+        end = (last.get("window") or {}).get("end_stamp")
+        where = f" (span ending at t={end:.1f} s)" if end is not None else ""
+        out.append(f"missing from {lacks}{where}: {found_text(last)}")
+    if s.get("diagnoses_skipped"):
+        out.append(f"{s['diagnoses_skipped']} span(s) not diagnosed (skipped: diagnoses "
+                   "slower than diagnose.period_s)")
+    if s.get("diagnoses_failed"):
+        errors = (s.get("diagnose") or {}).get("errors") or ["?"]
+        out.append(f"{s['diagnoses_failed']} diagnosis(es) failed, last: {errors[-1]}")
+    return out
+
+
+def _diagnosis_text(s: dict[str, Any]) -> str | None:
+    if s.get("diagnoses_run") is None:
+        return None
+    from ..diagnosed import found_text
+
+    last = s.get("last_diagnosis")
+    text = f"latest diagnosis: {found_text(last)}" if last else "no diagnosis yet"
+    return f"{text} ({s['diagnoses_run']} run, {s.get('diagnoses_skipped') or 0} skipped)"
 
 
 def _h1_text(r: dict[str, Any]) -> str:
@@ -186,5 +220,8 @@ def headline(s: dict[str, Any]) -> str:
         parts.append(f"recorded {s['recorded_messages']} messages, no sample lost")
     if not s["change_events"]:
         parts.append("0 change event(s)")
+    diag = _diagnosis_text(s)
+    if diag:
+        parts.append(diag)
     line = "; ".join(parts)
     return line if v["status"] == "none" else f"{v['status']}: {line}"

@@ -1,9 +1,10 @@
 """ResultCollector: keeps the latest identification results seen on the output topics.
 
-Subscribes to ``<ns>/model``, ``ridges``, ``validation`` and ``change`` of its namespace
-(all sporadic: one message per window) and keeps, per output, the last model, ridges and validation
-statuses, plus the last ``keep_models`` models, ridges and validations and the last 200
-change events (bounded memory in long runs). ``run --json`` reports from it, so a process
+Subscribes to ``<ns>/model``, ``ridges``, ``validation``, ``change`` and ``diagnosis`` of
+its namespace (all sporadic: one message per window or span) and keeps, per output, the last
+model, ridges and validation statuses, plus the last ``keep_models`` models, ridges and
+validations, the last 200 change events, the latest diagnosis and a thinned span-by-span
+history of the diagnoses (bounded memory in long runs). ``run --json`` reports from it, so a process
 that only runs the identification side (``--nodes identifier,gfrf``) reports the same way
 as the one-process pipeline, and models can be compared across processes by ``model_id``.
 """
@@ -20,7 +21,8 @@ from rclpy.node import Node
 from std_msgs.msg import String
 
 from ..core.online.history import RunHistory
-from ..topics import CHANGE, DEFAULT_NAMESPACE, MODEL, RIDGES, VALIDATION
+from ..diagnosed import DiagnosisHistory
+from ..topics import CHANGE, DEFAULT_NAMESPACE, DIAGNOSIS, MODEL, RIDGES, VALIDATION
 from .monitor import diagnostic_dicts
 
 DEPTH = 50
@@ -42,11 +44,15 @@ class ResultCollector(Node):
         self.validation_log: deque[dict[str, Any]] = deque(maxlen=keep_models)
         self.changes: deque[dict[str, Any]] = deque(maxlen=200)
         self.history = RunHistory()  # window by window, for the report of the run
-        self.counts = dict.fromkeys(("model", "ridges", "validation", "change"), 0)
+        self.last_diagnosis: dict[str, Any] | None = None
+        self.diagnosis_history = DiagnosisHistory()  # span by span, for the report
+        self.counts = dict.fromkeys(("model", "ridges", "validation", "change", "diagnosis"),
+                                    0)
         self.create_subscription(String, MODEL, self._on_model, DEPTH)
         self.create_subscription(String, RIDGES, self._on_ridges, DEPTH)
         self.create_subscription(DiagnosticArray, VALIDATION, self._on_validation, DEPTH)
         self.create_subscription(DiagnosticArray, CHANGE, self._on_change, DEPTH)
+        self.create_subscription(String, DIAGNOSIS, self._on_diagnosis, DEPTH)
 
     def _on_model(self, msg: String) -> None:
         self.counts["model"] += 1
@@ -76,6 +82,14 @@ class ResultCollector(Node):
         for s in diagnostic_dicts(msg):
             self.changes.append(s)
             self.history.change(s)
+
+
+    def _on_diagnosis(self, msg: String) -> None:
+        self.counts["diagnosis"] += 1
+        obj = _json(msg.data)
+        if obj is not None:
+            self.last_diagnosis = obj
+            self.diagnosis_history.add(obj)
 
 
 def _json(text: str) -> dict[str, Any] | None:

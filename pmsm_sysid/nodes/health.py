@@ -146,6 +146,53 @@ def gfrf_health(node: Any) -> Callable[[], Report]:
     return report
 
 
+def diagnose_health(node: Any) -> Callable[[], Report]:
+    """The live diagnosis's status: WARN with the effects while the latest diagnosis finds
+    physics the reference lacks, and when a diagnosis failed or spans were skipped."""
+    from .. import diagnosed
+
+    rate = Rate()
+
+    def report() -> Report:
+        counts, last = node.counts(), node.last
+        st = node.engine.stats
+        r, _ = rate(st.samples_received)
+        lacks = "the plant" if node.plant is not None else "the simulation"
+        problems = []
+        if last is not None and diagnosed.effects(last):
+            problems.append(f"missing from {lacks}: {diagnosed.found_text(last)}")
+        if node.last_failed:
+            problems.append(f"last diagnosis failed: {node.last_failed}")
+        skipped = counts["diagnoses_skipped"] - node.skips_before_last
+        if skipped:
+            problems.append(f"{skipped} span(s) skipped (diagnoses slower than period_s)")
+        if st.samples_received == 0:
+            problems.append("no input yet")
+        fs = node.sample_rate_hz() or 0.0
+        if problems:
+            message = "; ".join(problems)
+        elif last is None:
+            have = st.samples_received / fs if fs else 0.0
+            message = (f"ok: collecting the first span ({min(have, node.params['span_s']):.0f}"
+                       f" of {node.params['span_s']:g} s)")
+        else:
+            message = (f"ok: nothing missing from {lacks} in the latest span; "
+                       f"{counts['diagnoses_run']} diagnoses run")
+        before, after = diagnosed.held_out_nrmse(last or {})
+        values: dict[str, Any] = {
+            **counts, "input_rate_hz": r, "samples_received": st.samples_received,
+            "effects": ", ".join(str(e.get("name")) for e in diagnosed.effects(last or {})),
+            "last_span_end_s": (last or {}).get("window", {}).get("end_stamp"),
+            "force_nrmse_before": before, "force_nrmse_after": after,
+            "diagnosis_latency_p50_ms": st.fit_latency_p50_ms,
+            "diagnosis_latency_p99_ms": st.fit_latency_p99_ms,
+            "reference": node.reference}
+        level = WARN if problems else OK
+        return level, message, values
+
+    return report
+
+
 def sim_health(node: Any) -> Callable[[], Report]:
     """The sim motor's status: samples published and their rate."""
     rate = Rate()

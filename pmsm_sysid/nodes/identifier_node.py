@@ -123,6 +123,7 @@ class IdentifierNode(Node):
         self._last_input: float | None = None  # time.monotonic() of the newest input message
         self.stale = False
         self._input_ended = False  # this pipeline's sim has published its last sample
+        self.input_held = False  # this pipeline holds its sim on purpose (a worker is busy)
         self.stale_events = 0
         self._model_pub = self.create_publisher(String, MODEL, 50)
         self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION, 50)
@@ -279,9 +280,16 @@ class IdentifierNode(Node):
         end of the run, not stale input."""
         self._input_ended = True
 
+    def hold_input(self, held: bool) -> None:
+        """This pipeline holds its sim while a worker catches up (``True``) or lets it run
+        again: silence while held is not stale input, and the age restarts on release."""
+        if self.input_held and not held and self._last_input is not None:
+            self._last_input = time.monotonic()
+        self.input_held = held
+
     def _check_stale(self) -> None:
         age = self.input_age_s()
-        if self._input_ended:
+        if self._input_ended or self.input_held:
             return
         if age is not None and not self.stale and age > float(self.params["stale_after_s"]):
             self._report_stale(True, age)

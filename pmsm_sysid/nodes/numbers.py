@@ -20,7 +20,16 @@ from typing import Any
 from rclpy.node import Node
 from std_msgs.msg import Float64, Float64MultiArray, Int32
 
-from ..topics import FLOAT64_ARRAY_TYPE, INT32_TYPE, STAT_TOPICS, stat_topic
+from .. import diagnosed
+from ..topics import (
+    DIAGNOSIS_COUNTS,
+    DIAGNOSIS_STATS,
+    FLOAT64_ARRAY_TYPE,
+    FLOAT64_TYPE,
+    INT32_TYPE,
+    STAT_TOPICS,
+    stat_topic,
+)
 from .gfrf_msgs import ridge_rows
 
 _CLASSES = {INT32_TYPE: Int32, FLOAT64_ARRAY_TYPE: Float64MultiArray}
@@ -42,12 +51,16 @@ class NumberPublisher:
         self.node, self.depth = node, depth
         self._pubs: dict[str, Any] = {}
 
-    def publish(self, output: str, quantity: str, value: Any) -> None:
+    def _publisher(self, output: str, quantity: str) -> Any:
         name = stat_topic(output, quantity)
         if name not in self._pubs:
-            cls = _CLASSES.get(STAT_TOPICS[quantity][0], Float64)
+            spec = STAT_TOPICS.get(quantity) or DIAGNOSIS_COUNTS.get(quantity)
+            cls = _CLASSES.get(spec[0] if spec else FLOAT64_TYPE, Float64)
             self._pubs[name] = self.node.create_publisher(cls, name, self.depth)
-        pub = self._pubs[name]
+        return self._pubs[name]
+
+    def publish(self, output: str, quantity: str, value: Any) -> None:
+        pub = self._publisher(output, quantity)
         if pub.msg_type is Int32:
             pub.publish(Int32(data=int(value)))
         elif pub.msg_type is Float64MultiArray:
@@ -76,3 +89,14 @@ class NumberPublisher:
         self.publish(output, "h1_peak_hz", top["freq_hz"] if top else None)
         self.publish(output, "h1_peak_gain_db", top["gain_db"] if top else None)
         self.publish(output, "ridge_frequencies_hz", [row[3] for row in ridge_rows(gfrf)])
+
+    # -- what the diagnosis node publishes ----------------------------------------------
+    def prepare_diagnosis(self) -> None:
+        """Create the diagnosis's publishers now (they exist before the first result)."""
+        for quantity in diagnosed.numbers({}):
+            self._publisher(DIAGNOSIS_STATS, quantity)
+
+    def diagnosis(self, d: dict[str, Any]) -> None:
+        """Every effect's numbers (NaN when not named), the counts and the held-out fit."""
+        for quantity, value in diagnosed.numbers(d).items():
+            self.publish(DIAGNOSIS_STATS, quantity, value)

@@ -286,6 +286,39 @@ GFRF_SPECS: dict[str, Spec] = {
 }
 
 
+DIAGNOSE_SPECS: dict[str, Spec] = {
+    "plant_file": Spec("plant file (YAML) the drive is diagnosed against, or the name of a "
+                       "packaged one (drive, nominal, ...); empty with sim_namespace",
+                       read_only=True),
+    "sim_namespace": Spec("namespace of a simulator publishing its own thrust, speed and "
+                          "position beside the drive: the drive is diagnosed against "
+                          "recordings of it (instead of a plant file)", read_only=True),
+    "period_s": Spec("seconds of data between two diagnoses (stamp time: simulated seconds "
+                     "under a simulated clock)", 0.1, 86400.0),
+    "span_s": Spec("seconds of the latest inputs each diagnosis looks at; diagnose holds "
+                   "out the last 30 % of them to confirm what it names", 1.0, 3600.0),
+    "alpha": Spec("family-wise false-alarm level of each step that names an effect",
+                  1e-12, 0.5),
+    "min_share": Spec("smallest share of the mismatch an effect must explain to be named",
+                      0.0, 1.0),
+    "replay": Spec("also compare the speed replayed over short horizons, before and after"),
+    "gfrf": Spec("also compare the GFRFs of NARX models of the drive and a noisy simulated "
+                 "twin (costs about a third more CPU per diagnosis)"),
+    "queue_size": Spec("spans that may wait for the worker; when full the oldest is skipped "
+                       "(latest wins)", 1, 100, read_only=True),
+    "sample_rate_hz": Spec("sample rate in Hz; 0 = read from the stamps", 0.0, 1e6,
+                           read_only=True),
+    "tolerance_s": Spec("stamp alignment tolerance in s; 0 = half a sample period", 0.0, 10.0,
+                        read_only=True),
+    "speed_source": Spec("speed input: 'measured', 'derived' (from position by a backward "
+                         "difference) or 'auto' (measured when it arrives)", read_only=True),
+    "publish_period_s": Spec("period in s of the timer that publishes finished diagnoses",
+                             0.001, 10.0, read_only=True),
+    "worker": Spec("where diagnoses run: 'process' (a worker process of its own) or "
+                   "'thread' (a thread of this process)", read_only=True),
+}
+
+
 def check_orders(orders: Sequence[int]) -> tuple[int, ...]:
     """The GFRF orders as a tuple; DataError unless a non-empty choice among 1, 2, 3."""
     out = tuple(int(o) for o in orders)
