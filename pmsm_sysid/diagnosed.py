@@ -90,12 +90,13 @@ def effect_text(e: Mapping[str, Any], confidence: bool = True) -> str:
     return text
 
 
-def found_text(d: Mapping[str, Any], limit: int | None = None) -> str:
+def found_text(d: Mapping[str, Any], limit: int | None = None,
+               confidence: bool = True) -> str:
     """What a diagnosis found, in a few words: the effects, or "nothing missing"."""
     found: Sequence[Mapping[str, Any]] = effects(d)
     if not found:
         return "nothing missing"
-    shown = [effect_text(e) for e in found[:limit]]
+    shown = [effect_text(e, confidence) for e in found[:limit]]
     more = len(found) - len(shown)
     return ", ".join(shown) + (f" +{more}" if more > 0 else "")
 

@@ -7,8 +7,9 @@ cross-validation of the newest model on the next window; ``own window``, the GFR
 check of that model on its estimation window and of its linear part's stability) as
 pass/fail with the one reason that matters and what to try, beside the run's count of windows
 passed (a failed correlation test in a run that passes as often as a correct model is shown
-as chance, ``fail``, not ``FAIL``); the latest change events with their time; a hint when
-nothing arrives at all. Numbers are shown with 3 significant digits.
+as chance, ``fail``, not ``FAIL``); the latest change events with their time; the latest
+live diagnosis in one line; a hint when nothing arrives at all. Numbers are shown with 3
+significant digits.
 """
 
 from __future__ import annotations
@@ -304,6 +305,32 @@ def nothing_received(snap: Mapping[str, Any]) -> str | None:
             "--namespace)")
 
 
+WIDTH = 80
+
+
+def diagnosis_line(view: Mapping[str, Any], width: int = WIDTH) -> Text:
+    """The latest live diagnosis in one line of at most ``width`` characters: when (the
+    span's end), how many ran and were skipped, what it found missing."""
+    from ..diagnosed import found_text, held_out_nrmse
+
+    d = view.get("diagnosis")
+    if not d or "error" in d:
+        return Text("diagnosis: none yet" if not d else "diagnosis: unreadable message")
+    counts = d.get("counts") or {}
+    head = (f"diagnosis {clock((d.get('window') or {}).get('end_stamp'))}, "
+            f"{counts.get('diagnoses_run', '?')} run/{counts.get('diagnoses_skipped', '?')} "
+            "skipped: ")
+    found = found_text(d)
+    if not d.get("effects"):
+        found += f" (force NRMSE {num(held_out_nrmse(d)[0])})"
+    text = head + found
+    if len(text) > width and d.get("effects"):  # the confidences go first
+        text = head + found_text(d, confidence=False)
+    if len(text) > width:
+        text = text[: width - 3] + "..."
+    return Text(text, style="bold yellow" if d.get("effects") else "")
+
+
 def view(snap: Mapping[str, Any], elapsed_s: float) -> Group:
     """The whole screen of one snapshot."""
     sysid = snap["sysid"]
@@ -313,4 +340,5 @@ def view(snap: Mapping[str, Any], elapsed_s: float) -> Group:
     if hint:
         parts.append(Text(hint, style="yellow"))
     return Group(*parts, topics_table(snap), models_table(sysid), ridges_line(sysid),
-                 validation_table(sysid), changes_block(sysid))
+                 validation_table(sysid), changes_block(sysid),
+                 diagnosis_line(sysid))

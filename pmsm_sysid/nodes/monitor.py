@@ -23,6 +23,7 @@ from ..rosutil import data_qos, message_class, sample_value, stamp_to_ns
 from ..topics import (
     CHANGE,
     DEFAULT_NAMESPACE,
+    DIAGNOSIS,
     INPUT_TYPES,
     MODEL,
     RIDGE_FREQUENCIES,
@@ -76,6 +77,7 @@ class MonitorNode(Node):
             (CHANGE, DiagnosticArray,
              lambda m: self.view.on_change(stamp_to_ns(m.header.stamp) / 1e9,
                                            diagnostic_dicts(m))),
+            (DIAGNOSIS, String, lambda m: self.view.on_diagnosis(m.data)),
         ]
         for name, cls, handler in outputs:
             type_name = f"{cls.__module__.split('.')[0]}/msg/{cls.__name__}"

@@ -9,10 +9,12 @@ function                 shows
 ``h1_over_time``         frequency and gain of the largest H1 peak of each window's model
 ``change_over_time``     the change detector's score with its threshold, and the events
 ``latency_over_time``    fit time of each window, and the windows skipped
+``diagnosis_over_time``  the live diagnosis span by span: the held-out force NRMSE before and
+                         after the effects it names, and each named effect's numbers
 =======================  ====================================================================
 
-Time is seconds since the first window of the run (the end of each window). ``data`` holds
-what was drawn, per output.
+Time is seconds since the first window of the run (the end of each window or span).
+``data`` holds what was drawn, per output (per effect number for the diagnosis).
 """
 
 from __future__ import annotations
@@ -32,6 +34,8 @@ XLABEL = "time since the first window (s)"
 
 def _t0(hist: Mapping[str, Any]) -> float:
     ts = [r["t"] for rows in hist["outputs"].values() for r in rows if r.get("t") is not None]
+    ts += [r["t"] for r in (hist.get("diagnosis") or {}).get("rows") or []
+           if r.get("t") is not None]
     return min(ts) if ts else 0.0
 
 
@@ -176,7 +180,66 @@ def latency_over_time(hist: Mapping[str, Any]) -> Plot:
                 {"fit_ms": latency, "skipped": skipped})
 
 
+MAX_EFFECT_PANELS = 8
+COUNTS = ("effects_named", "unexplained", "force_nrmse_before", "force_nrmse_after")
+
+
+def _drawn(line: Any) -> dict[str, Any]:
+    return {"t": np.asarray(line.get_xdata()), "v": np.asarray(line.get_ydata())}
+
+
+def _diagnosis_series(rows: Sequence[Mapping[str, Any]], key: str,
+                      t0: float) -> tuple[Any, Any]:
+    """(t, value) of every span; NaN where the span did not name the effect (a gap)."""
+    rows = [r for r in rows if r.get("t") is not None]
+    t = np.asarray([float(r["t"]) - t0 for r in rows])
+    v = np.asarray([float((r.get("numbers") or {}).get(key, np.nan)) for r in rows])
+    return t, v
+
+
+def _effect_label(key: str) -> str:
+    from ..topics import DIAGNOSIS_PARAMS
+
+    effect, param = key.split("/", 1)
+    unit = dict(DIAGNOSIS_PARAMS.get(effect, ())).get(param, "")
+    return f"{effect}\n{param}" + (f" ({unit})" if unit and unit != "1" else "")
+
+
+@styled
+def diagnosis_over_time(hist: Mapping[str, Any]) -> Plot:
+    rows = (hist.get("diagnosis") or {}).get("rows") or []
+    t0 = _t0(hist)
+    keys = list(dict.fromkeys(k for r in rows for k in r.get("numbers") or {}
+                              if k not in COUNTS))[:MAX_EFFECT_PANELS]
+    fig = new_figure(8.0, 2.4 + 1.8 * len(keys))
+    axes = np.atleast_1d(fig.subplots(1 + len(keys), 1, sharex=True, squeeze=False)[:, 0])
+    data: dict[str, Any] = {"nrmse": {}, "effects": {}}
+    for key, label in (("force_nrmse_before", "plant"), ("force_nrmse_after", "with the effects")):
+        t, v = _diagnosis_series(rows, key, t0)
+        (line,) = axes[0].plot(t, v, ".-", markersize=3, label=label)
+        data["nrmse"][key] = _drawn(line)
+    axes[0].set_ylabel("held-out\nforce NRMSE")
+    axes[0].set_title("each span diagnosed: the force NRMSE on its held-out last 30 %")
+    axes[0].legend(loc="best")
+    for ax, key in zip(axes[1:], keys, strict=True):
+        t, v = _diagnosis_series(rows, key, t0)
+        (line,) = ax.plot(t, v, "o-", markersize=3, color="tab:red")
+        ax.set_ylabel(_effect_label(key))
+        data["effects"][key] = _drawn(line)
+    axes[-1].set_xlabel(XLABEL)
+    named = ", ".join(keys) or "none"
+    return Plot(fig, "run_diagnosis", "The live diagnosis span by span: the held-out force "
+                "NRMSE of the plant and with the effects found, and the numbers of each effect "
+                f"named in any span (a gap where a span did not name it). Effects: {named}.",
+                data)
+
+
 def figures(hist: Mapping[str, Any]) -> list[Plot]:
     """Every figure of the run history, in page order."""
-    return [fit_over_time(hist), terms_over_time(hist), h1_over_time(hist),
-            change_over_time(hist), latency_over_time(hist)]
+    out = []
+    if any(hist["outputs"].values()):
+        out = [fit_over_time(hist), terms_over_time(hist), h1_over_time(hist),
+               change_over_time(hist), latency_over_time(hist)]
+    if (hist.get("diagnosis") or {}).get("rows"):
+        out.append(diagnosis_over_time(hist))
+    return out

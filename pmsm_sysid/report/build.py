@@ -177,24 +177,24 @@ def report_summary(d: Mapping[str, Any], out_dir: str | Path) -> ReportResult:
     ``run.json``, then reported as :func:`report_run` does."""
     out = _prepare(out_dir)
     path = _dump(d, out / "run.json")
-    if not isinstance(d.get("last_model"), dict):
-        sink = Sink(out, 1)
-        try:
-            from . import run
-
-            return _finish(sink, "pmsm-sysid report: live run", run.sections(d, sink), "run",
-                           "no model was fitted", extra=(path,))
-        finally:
-            sink.close()
-    return report_run(d, path, out)
+    return report_run(d, path, out, extra=(path,))
 
 
-def report_run(d: Mapping[str, Any], json_path: Path, out_dir: str | Path) -> ReportResult:
-    """A ``run --json`` summary: the run over time, then its last model."""
+def report_run(d: Mapping[str, Any], json_path: Path, out_dir: str | Path,
+               extra: tuple[Path, ...] = ()) -> ReportResult:
+    """A ``run --json`` summary: the run over time (models, diagnoses), then its last
+    model (when one was fitted)."""
     from . import run
 
     out = _prepare(out_dir)
-    sink = Sink(out, 6 + FREQ_FIGURES)
+    if not isinstance(d.get("last_model"), dict):
+        sink = Sink(out, 2)
+        try:
+            return _finish(sink, "pmsm-sysid report: live run", run.sections(d, sink), "run",
+                           "no model was fitted", extra=extra)
+        finally:
+            sink.close()
+    sink = Sink(out, 7 + FREQ_FIGURES)
     try:
         before = tuple(run.sections(d, sink))
         model = dict(d["last_model"])
@@ -244,7 +244,7 @@ def kind_of(d: Any) -> str:
     if isinstance(d, dict):
         if "terms" in d:
             return "identify"
-        if isinstance(d.get("last_model"), dict):
+        if isinstance(d.get("last_model"), dict) or isinstance(d.get("last_diagnosis"), dict):
             return "run"
         if "h1" in d and "h2" in d:
             return "gfrf"

@@ -29,6 +29,7 @@ def facts(d: Mapping[str, Any]) -> Facts:
                         f"{_n(d.get('fit_latency_p99_ms'))} ms"),
         ("change events", str(len(d.get("change_events") or []))),
         *verdict_facts(d),
+        *_diagnosis_facts(d),
     ))
 
 
@@ -53,6 +54,18 @@ def verdict_facts(d: Mapping[str, Any]) -> list[tuple[str, str]]:
     return out
 
 
+def _diagnosis_facts(d: Mapping[str, Any]) -> tuple[tuple[str, str], ...]:
+    if d.get("diagnoses_run") is None:
+        return ()
+    from ..diagnosed import found_text
+
+    last = d.get("last_diagnosis")
+    return (("diagnoses", f"run {d['diagnoses_run']}, skipped "
+                          f"{_n(d.get('diagnoses_skipped'), '{}')}, failed "
+                          f"{_n(d.get('diagnoses_failed'), '{}')}"),
+            ("latest diagnosis", found_text(last) if last else "none"))
+
+
 def events_table(hist: Mapping[str, Any]) -> Table:
     t0 = min((r["t"] for rows in hist["outputs"].values() for r in rows
               if r.get("t") is not None), default=0.0)
@@ -70,7 +83,8 @@ def sections(d: Mapping[str, Any], sink: Sink) -> list[Section]:
 
     hist = d.get("history")
     blocks: list[Block] = [facts(d)]
-    if not hist or not any(hist.get("outputs", {}).values()):
+    spans = ((hist or {}).get("diagnosis") or {}).get("rows") or []
+    if not hist or not (any(hist.get("outputs", {}).values()) or spans):
         blocks.append(Note("this summary holds no window-by-window history (written by an "
                            "older version, or no identification ran): only the last model is "
                            "shown"))
@@ -78,6 +92,29 @@ def sections(d: Mapping[str, Any], sink: Sink) -> list[Section]:
     stride = max((hist.get("stride") or {}).values(), default=1)
     if stride > 1:
         blocks.append(Note(f"long run: the history keeps every {stride}th window"))
-    images = [sink.figure(p) for p in figures(hist)]
-    return [Section("Live run", tuple(blocks)),
-            Section("Live run: models over time", (*images, events_table(hist)))]
+    plots = figures(hist)
+    out = [Section("Live run", tuple(blocks))]
+    models = [sink.figure(p) for p in plots if p.name != "run_diagnosis"]
+    if models:
+        out.append(Section("Live run: models over time", (*models, events_table(hist))))
+    if spans:
+        diag = next(p for p in plots if p.name == "run_diagnosis")
+        out.append(Section("Live run: diagnosis over time",
+                           (sink.figure(diag), diagnosis_table(hist))))
+    return out
+
+
+def diagnosis_table(hist: Mapping[str, Any]) -> Table:
+    """The spans whose diagnosis named something (at most the last 50)."""
+    from ..plots.history import _t0
+
+    t0 = _t0(hist)
+    diag = hist.get("diagnosis") or {}
+    named = [r for r in diag.get("rows") or [] if r.get("effects")]
+    rows = tuple((_n(None if r.get("t") is None else r["t"] - t0, "{:.1f}"),
+                  ", ".join(r["effects"])) for r in named[-50:])
+    stride = int(diag.get("stride") or 1)
+    kept = f"; the history keeps every {stride}th span" if stride > 1 else ""
+    return Table(f"Spans that named missing physics: {len(named)} of "
+                 f"{len(diag.get('rows') or [])}{kept} (time of the span's end since the "
+                 "first window, s)", ("time (s)", "effects"), rows)

@@ -11,7 +11,8 @@ A :class:`TopicStats` is fed ``(receive_time_s, stamp_ns, value)`` per message:
   ``round(step / period) - 1`` over the gaps; ``backwards`` counts non-increasing stamps.
 
 :class:`SysIdView` keeps the latest model / ridges / validation / change events published by
-the identification side (plain dicts and JSON text, converted from the messages by the node).
+the identification side and the latest live diagnosis (its span, effects, held-out fit and
+counters; plain dicts and JSON text, converted from the messages by the node).
 The screen itself is drawn by :mod:`pmsm_sysid.cli.monitor_view`.
 """
 
@@ -128,6 +129,7 @@ class SysIdView:
     ridge_frequencies: list[float] | None = None
     validation: list[dict[str, Any]] | None = None
     changes: list[dict[str, Any]] = field(default_factory=list)
+    diagnosis: dict[str, Any] | None = None
 
     def on_model(self, text: str) -> None:
         """A model message (identify JSON): keep terms and fit, the latest one per output."""
@@ -176,7 +178,23 @@ class SysIdView:
             self.changes.append(dict(s, stamp_s=stamp_s))
         del self.changes[:-self.max_events]
 
+    def on_diagnosis(self, text: str) -> None:
+        """A diagnosis message (diagnose JSON of one span): keep its span, effects (name,
+        params, confidence), held-out fit, reference and counters."""
+        obj = _parse_json(text)
+        if obj is None:
+            self.diagnosis = {"error": "not JSON"}
+            return
+        effects = [{k: e.get(k) for k in ("name", "params", "confidence")}
+                   for e in obj.get("effects") or [] if isinstance(e, dict)]
+        fit = (obj.get("fit") or {}).get("validation") or {}
+        self.diagnosis = {"window": obj.get("window"), "effects": effects,
+                          "fit": {"validation": {k: fit.get(k) for k in
+                                                 ("nrmse_before", "nrmse_after")}},
+                          "reference": obj.get("reference"), "counts": obj.get("counts")}
+
     def snapshot(self) -> dict[str, Any]:
         return {"model": self.model, "models": dict(self.models), "ridges": self.ridges,
                 "ridge_frequencies": self.ridge_frequencies,
-                "validation": self.validation, "changes": list(self.changes)}
+                "validation": self.validation, "changes": list(self.changes),
+                "diagnosis": self.diagnosis}
