@@ -243,7 +243,10 @@ class DiagnosisNode(Node):
         self.skips_before_last, self._skips_at_last = (self._skips_at_last,
                                                        d["counts"]["diagnoses_skipped"])
         log = self.get_logger()  # type: ignore[no-untyped-call]
-        (log.warning if diagnosed.effects(d) else log.info)(diagnosed.line(d))
+        if diagnosed.effects(d):  # one call site per severity (rclpy's logger requires it)
+            log.warning(diagnosed.line(d))
+        else:
+            log.info(diagnosed.line(d))
 
     # ------------------------------------------------------------------ summary
     def summary(self) -> dict[str, Any]:
