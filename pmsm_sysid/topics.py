@@ -92,7 +92,7 @@ DIAGNOSIS_COUNTS: dict[str, tuple[str, str, str]] = {
                     "as unexplained, with the axis they live on)"),
     "force_nrmse_before": (FLOAT64_TYPE, "1", "force NRMSE of the plant on the held-out last "
                            "30 % of the span (equation error of the inverse dynamics)"),
-    "force_nrmse_after": (FLOAT64_TYPE, "1", "the same with the named effects added"),
+    "force_nrmse_after": (FLOAT64_TYPE, "1", "the same with what the diagnosis found added"),
 }
 
 

@@ -1,8 +1,10 @@
 """RecorderNode: subscribes with ``raw=True`` and stores the CDR bytes through a BagRecorder.
 
-- Topics: by default the inputs, the identification outputs and their plottable numbers under
-  the namespace (``<ns>/thrust``, ``<ns>/model``, ``<ns>/stats/speed/free_run_r2``, ...; the
-  node itself is ``<ns>/pmsm_record``); ``inputs`` (topic -> type) replaces the three input
+- Topics: by default the inputs, the identification and diagnosis outputs and the plottable
+  numbers of the models under the namespace (``<ns>/thrust``, ``<ns>/model``,
+  ``<ns>/diagnosis``, ``<ns>/stats/speed/free_run_r2``, ...; the diagnosis's numbers are in
+  its JSON, so its own ``stats`` topics are not recorded by default; the node itself is
+  ``<ns>/pmsm_record``); ``inputs`` (topic -> type) replaces the three input
   topics, e.g. by the ``JointState`` topic an identifier listens to; with ``topics`` exactly
   those (relative names are resolved in the namespace). Topics of known type are subscribed at
   once (nothing published after the recorder starts is missed); others when they show up in
