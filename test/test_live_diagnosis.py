@@ -179,3 +179,55 @@ def test_a_cogging_switched_on_is_named_within_two_periods_and_converges(
         n = named[t]["numbers"]
         assert n["cogging/amplitude_n"] == pytest.approx(COGGING["amplitude_n"], rel=0.2)
         assert n["cogging/pitch_m"] == pytest.approx(COGGING["pitch_m"], rel=0.02)
+
+
+def _takes_sim() -> bool:
+    from pmsm_sysid.nodes.diagnosis_work import diagnose_takes_sim
+
+    return diagnose_takes_sim()
+
+
+@pytest.mark.xfail(not _takes_sim(), strict=True, raises=Exception,
+                   reason="this version's diagnose cannot compare with a simulator's recording")
+def test_against_a_simulator_beside_the_drive_the_missing_friction_is_named(
+        ros_context: Any) -> None:
+    """``--diagnose-sim /twin``: the drive (with a 2 N Coulomb friction) on /pmsm, its
+    simulator (the same motor without it, its own noise and excitation) on /twin; every span
+    of the drive is diagnosed against the simulator's latest span."""
+    from pmsm_sysid.app import build_pipeline
+    from pmsm_sysid.core.physics.plant import CoulombFriction, load_plant
+    from pmsm_sysid.nodes.sim_node import MotorSimNode
+
+    drive = load_plant("drive")
+    with build_pipeline(("sim", "diagnose"), plant=drive.with_effects(
+            coulomb_friction=CoulombFriction(COULOMB_N)), excitation="broadband", seed=0,
+            clock="sim", context=ros_context,
+            diagnose_params={"sim_namespace": "/twin", "span_s": SPAN_S,
+                             "period_s": SPAN_S}) as pipe:
+        twin = MotorSimNode(context=ros_context, plant=drive, excitation="broadband", seed=1,
+                            namespace="/twin", clock="sim")
+        twin.stop_timer()
+        pipe.executor.add_node(twin)
+        d = pipe.diagnose
+        while d.sim.latest is None:  # the simulator runs a span ahead of the drive
+            twin.step(100)
+            pipe.executor.spin_once(timeout_sec=0.0)
+        n = round(2 * SPAN_S * 500)
+        while pipe.sim.published < n:  # both sims in step, held while a span waits
+            if not d.engine.windows_waiting and \
+                    pipe.sim.published - d.engine.samples_received < 200:
+                pipe.sim.step(100)
+                twin.step(100)
+            pipe.executor.spin_once(timeout_sec=0.0)
+        pipe._spin_while(lambda: d.engine.samples_received < n, 30.0)
+        pipe.finish()
+        s = pipe.summary()
+        pipe.executor.remove_node(twin)
+        twin.destroy_node()
+
+    assert s["diagnoses_run"] == 2 and s["diagnoses_failed"] == 0, s["diagnose"]["errors"]
+    last = s["last_diagnosis"]
+    assert last["reference"] == "sim_recording" and last["sim_window"]["samples"] == 7500
+    e = _named(last)["coulomb_friction"]
+    assert e["params"]["amplitude_n"] == pytest.approx(COULOMB_N, rel=0.1)
+    assert s["diagnose"]["sim_namespace"] == "/twin"

@@ -286,7 +286,7 @@ def test_monitor_cli_once_writes_json(ros_env: int, tmp_path: Path) -> None:
         timeout=60)
     assert proc.returncode == 0, proc.stderr
     snap = json.loads(out.read_text())
-    assert len(snap["topics"]) == 8 and snap["namespace"] == "/quiet"
+    assert len(snap["topics"]) == 9 and snap["namespace"] == "/quiet"  # 3 in, 6 out
     assert [t["count"] for t in snap["topics"][:3]] == [0] * 3
     assert "thrust" in proc.stdout and "model: none yet" in proc.stdout
     assert max(len(line) for line in proc.stdout.splitlines()) <= 80  # piped: 80 columns
