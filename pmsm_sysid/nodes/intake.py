@@ -1,7 +1,8 @@
 """The three input topics of a drive as serialized messages: stamp and value per message.
 
-:class:`InputIntake` subscribes to ``<prefix>thrust``, ``speed`` and ``position`` (relative
-names in the node's namespace, or under another namespace given in full) with the data QoS
+:class:`InputIntake` subscribes to ``thrust``, ``speed`` and ``position`` (relative names in
+the node's namespace, or under another namespace given in full) with the data QoS at
+keep-last ``SLACK_DEPTH`` (as the identifier's own input subscriptions)
 and hands each message's ``header.stamp`` and value to ``push(signal, stamp_ns, value)``,
 read straight from the CDR bytes (the generic deserializer for anything else). A burst costs
 one executor callback, not one per message: each callback also takes what already waits on
@@ -17,7 +18,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
 from ..bagio.cdr import decode_stamped
-from ..rosutil import data_qos, message_class, sample_value, stamp_to_ns
+from ..rosutil import SLACK_DEPTH, data_qos, message_class, sample_value, stamp_to_ns
 from ..topics import INPUT_TYPES, topic_name
 
 DRAIN_ROUNDS = 100  # at most 300 input messages taken per subscription callback
@@ -32,10 +33,11 @@ class InputIntake:
         self._push = push
         self._seen = on_message or (lambda: None)
         self._types = {sig: message_class(t) for sig, t in INPUT_TYPES.items()}
-        self.topics = {sig: (topic_name(namespace, sig) if namespace is not None
-                             else node.resolve_topic_name(sig)) for sig in INPUT_TYPES}
+        names = {sig: topic_name(namespace, sig) if namespace is not None else sig
+                 for sig in INPUT_TYPES}  # relative names: remap rules apply as usual
+        self.topics = {sig: node.resolve_topic_name(name) for sig, name in names.items()}
         self._subs = {sig: node.create_subscription(
-            self._types[sig], self.topics[sig], self._callback(sig), data_qos(), raw=True)
+            self._types[sig], names[sig], self._callback(sig), data_qos(SLACK_DEPTH), raw=True)
             for sig in INPUT_TYPES}
 
     def _callback(self, sig: str) -> Any:
