@@ -36,6 +36,17 @@ def effects(d: Mapping[str, Any]) -> list[Mapping[str, Any]]:
     return [e for e in d.get("effects") or [] if isinstance(e, Mapping)]
 
 
+def sim_only(d: Mapping[str, Any]) -> list[Mapping[str, Any]]:
+    """Against a simulator's recording: the effects the simulation has and the drive lacks."""
+    return [e for e in d.get("sim_only") or [] if isinstance(e, Mapping)]
+
+
+def mismatch(d: Mapping[str, Any]) -> bool:
+    """The diagnosis found a difference: physics the reference lacks (or, against a
+    simulator's recording, physics only the simulation has)."""
+    return bool(effects(d) or sim_only(d))
+
+
 def named(d: Mapping[str, Any]) -> list[Mapping[str, Any]]:
     """The library effects a diagnosis named."""
     return [e for e in effects(d) if e.get("name") != UNEXPLAINED]
@@ -92,13 +103,18 @@ def effect_text(e: Mapping[str, Any], confidence: bool = True) -> str:
 
 def found_text(d: Mapping[str, Any], limit: int | None = None,
                confidence: bool = True) -> str:
-    """What a diagnosis found, in a few words: the effects, or "nothing missing"."""
+    """What a diagnosis found, in a few words: the effects, or "nothing missing" (and what
+    only the simulation has, against a simulator's recording)."""
     found: Sequence[Mapping[str, Any]] = effects(d)
-    if not found:
-        return "nothing missing"
     shown = [effect_text(e, confidence) for e in found[:limit]]
     more = len(found) - len(shown)
-    return ", ".join(shown) + (f" +{more}" if more > 0 else "")
+    text = (", ".join(shown) + (f" +{more}" if more > 0 else "")) if found \
+        else "nothing missing"
+    extra = sim_only(d)
+    if extra:
+        text += "; only in the simulation: " + ", ".join(effect_text(e, confidence)
+                                                          for e in extra)
+    return text
 
 
 def line(d: Mapping[str, Any]) -> str:

@@ -311,7 +311,7 @@ WIDTH = 80
 def diagnosis_line(view: Mapping[str, Any], width: int = WIDTH) -> Text:
     """The latest live diagnosis in one line of at most ``width`` characters: when (the
     span's end), how many ran and were skipped, what it found missing."""
-    from ..diagnosed import found_text, held_out_nrmse
+    from ..diagnosed import found_text, held_out_nrmse, mismatch
 
     d = view.get("diagnosis")
     if not d or "error" in d:
@@ -321,14 +321,14 @@ def diagnosis_line(view: Mapping[str, Any], width: int = WIDTH) -> Text:
             f"{counts.get('diagnoses_run', '?')} run/{counts.get('diagnoses_skipped', '?')} "
             "skipped: ")
     found = found_text(d)
-    if not d.get("effects"):
+    if not mismatch(d):
         found += f" (force NRMSE {num(held_out_nrmse(d)[0])})"
     text = head + found
-    if len(text) > width and d.get("effects"):  # the confidences go first
+    if len(text) > width and mismatch(d):  # the confidences go first
         text = head + found_text(d, confidence=False)
     if len(text) > width:
         text = text[: width - 3] + "..."
-    return Text(text, style="bold yellow" if d.get("effects") else "")
+    return Text(text, style="bold yellow" if mismatch(d) else "")
 
 
 def view(snap: Mapping[str, Any], elapsed_s: float) -> Group:

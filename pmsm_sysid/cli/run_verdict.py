@@ -159,11 +159,11 @@ def verdict(s: dict[str, Any]) -> dict[str, Any]:
 def diagnosis_warnings(s: dict[str, Any]) -> list[str]:
     """What the live diagnosis found missing in its latest span, and the spans it could not
     diagnose (skipped to keep up, or failed)."""
-    from ..diagnosed import effects, found_text
+    from ..diagnosed import found_text, mismatch
 
     out = []
     last = s.get("last_diagnosis")
-    if last and effects(last):
+    if last and mismatch(last):
         lacks = "the simulation" if last.get("reference") == "sim_recording" else "the plant"
         end = (last.get("window") or {}).get("end_stamp")
         where = f" (span ending at t={end:.1f} s)" if end is not None else ""

@@ -243,7 +243,7 @@ class DiagnosisNode(Node):
         self.skips_before_last, self._skips_at_last = (self._skips_at_last,
                                                        d["counts"]["diagnoses_skipped"])
         log = self.get_logger()  # type: ignore[no-untyped-call]
-        if diagnosed.effects(d):  # one call site per severity (rclpy's logger requires it)
+        if diagnosed.mismatch(d):  # one call site per severity (rclpy's logger requires it)
             log.warning(diagnosed.line(d))
         else:
             log.info(diagnosed.line(d))

@@ -159,7 +159,7 @@ def diagnose_health(node: Any) -> Callable[[], Report]:
         r, _ = rate(st.samples_received)
         lacks = "the plant" if node.plant is not None else "the simulation"
         problems = []
-        if last is not None and diagnosed.effects(last):
+        if last is not None and diagnosed.mismatch(last):
             problems.append(f"missing from {lacks}: {diagnosed.found_text(last)}")
         if node.last_failed:
             problems.append(f"last diagnosis failed: {node.last_failed}")

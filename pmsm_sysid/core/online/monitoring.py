@@ -185,10 +185,13 @@ class SysIdView:
         if obj is None:
             self.diagnosis = {"error": "not JSON"}
             return
-        effects = [{k: e.get(k) for k in ("name", "params", "confidence")}
-                   for e in obj.get("effects") or [] if isinstance(e, dict)]
+        def brief(key: str) -> list[dict[str, Any]]:
+            return [{k: e.get(k) for k in ("name", "params", "confidence")}
+                    for e in obj.get(key) or [] if isinstance(e, dict)]
+
         fit = (obj.get("fit") or {}).get("validation") or {}
-        self.diagnosis = {"window": obj.get("window"), "effects": effects,
+        self.diagnosis = {"window": obj.get("window"), "effects": brief("effects"),
+                          "sim_only": brief("sim_only"),
                           "fit": {"validation": {k: fit.get(k) for k in
                                                  ("nrmse_before", "nrmse_after")}},
                           "reference": obj.get("reference"), "counts": obj.get("counts")}
