@@ -158,7 +158,7 @@ class DiagnosisNode(Node):
                                       lambda: self._speed_published(self.sim_intake),
                                       tol_ns, fs_ns)
                 self.sim_sizer = SpanSizer(p["span_s"], p["period_s"], rate, self.sim.resize)
-                self.sim_intake = InputIntake(self, self.sim.push, self.reference)
+                self.sim_intake = InputIntake(self, self._push_sim, self.reference)
         except BaseException:
             self.engine.stop()  # ends the worker process
             raise
@@ -174,8 +174,11 @@ class DiagnosisNode(Node):
     def _push(self, signal: str, stamp_ns: int, value: float) -> None:
         self.engine.push(signal, stamp_ns, value)
         self.sizer.check(self.engine.aligner.period_ns)
-        if self.sim is not None:
-            self.sim_sizer.check(self.sim.aligner.period_ns)
+
+    def _push_sim(self, signal: str, stamp_ns: int, value: float) -> None:
+        assert self.sim is not None
+        self.sim.push(signal, stamp_ns, value)
+        self.sim_sizer.check(self.sim.aligner.period_ns)
 
     def _speed_published(self, intake: InputIntake | None) -> bool:
         return intake is not None and self.count_publishers(intake.topics["speed"]) > 0
