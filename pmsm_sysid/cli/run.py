@@ -177,16 +177,10 @@ def _with_diagnosis(nodes: tuple[str, ...], args: argparse.Namespace,
                              "diagnosis has one reference")
     if params.get("plant_file"):
         load_plant(str(params["plant_file"]))
-    else:
-        from ..nodes.diagnosis_work import diagnose_takes_sim
-
-        ns = normalize_namespace(str(params["sim_namespace"]))
-        if ns == normalize_namespace(args.namespace):
-            raise PmsmSysidError(f"--diagnose-sim {ns}: that is the drive's own namespace "
-                                 "(--namespace); the simulator must publish under another one")
-        if not diagnose_takes_sim():
-            raise PmsmSysidError("--diagnose-sim: this version of diagnose cannot compare "
-                                 "with a simulator's recording; give --diagnose PLANT.yaml")
+    elif normalize_namespace(str(params["sim_namespace"])) == normalize_namespace(args.namespace):
+        raise PmsmSysidError(f"--diagnose-sim {params['sim_namespace']}: that is the drive's "
+                             "own namespace (--namespace); the simulator must publish under "
+                             "another one")
     return tuple(dict.fromkeys([*nodes, "diagnose"]))
 
 

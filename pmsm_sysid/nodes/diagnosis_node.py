@@ -49,7 +49,7 @@ from ..core.online.spans import LatestSpan, SpanSizer
 from ..core.online.streaming import Window
 from ..core.online.workerproc import ProcessWorker
 from ..topics import DEFAULT_NAMESPACE, DIAGNOSIS, normalize_namespace
-from .diagnosis_work import DiagnoseJob, LiveDiagnoser, diagnose_takes_sim
+from .diagnosis_work import DiagnoseJob, LiveDiagnoser
 from .health import HealthPublisher, diagnose_health
 from .intake import InputIntake
 from .numbers import NumberPublisher
@@ -83,9 +83,6 @@ def reference(p: dict[str, Any], namespace: str) -> tuple[Any, str]:
     if ns == normalize_namespace(namespace):
         raise DataError(f"sim_namespace {ns} is the drive's own namespace: the simulator must "
                         "publish under another one")
-    if not diagnose_takes_sim():
-        raise DataError("this version of diagnose cannot compare with a simulator's "
-                        "recording; give a plant file")
     return None, ns
 
 

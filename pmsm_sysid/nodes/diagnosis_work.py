@@ -20,7 +20,6 @@ plant, so it would refuse an effect that has just appeared.
 
 from __future__ import annotations
 
-import inspect
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -50,13 +49,6 @@ def window_block(w: Window, fs: float) -> dict[str, Any]:
     return {"seq": w.seq, "start_stamp": w.start_stamp, "end_stamp": w.end_stamp,
             "samples": w.stop_index - w.start_index, "sample_rate_hz": fs,
             "speed_derived": w.speed_derived}
-
-
-def diagnose_takes_sim() -> bool:
-    """This version's ``ps.diagnose`` compares with a simulator's recording (``sim=``)."""
-    import pmsm_sysid as ps
-
-    return "sim" in inspect.signature(ps.diagnose).parameters
 
 
 class LiveDiagnoser:
