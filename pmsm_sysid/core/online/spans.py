@@ -29,11 +29,6 @@ def samples_of(seconds: float, period_ns: int) -> int:
     return max(2, round(seconds * NS_PER_S / period_ns))
 
 
-def rate_of(period_ns: int | None, fallback_hz: float) -> float:
-    """The sample rate of a period in ns (``fallback_hz`` while it is unknown)."""
-    return NS_PER_S / period_ns if period_ns else fallback_hz
-
-
 class SpanSizer:
     """Keeps a window ring sized ``span_s``/``period_s`` in samples of the stream's rate.
 
