@@ -99,13 +99,23 @@ def test_ros_args_errors_are_one_line_and_exit_2(ros_env: int, tmp_path: Path) -
 
 def test_the_readme_lists_every_topic_with_its_type() -> None:
     """The topic table of the README is in step with the code's topic names and types."""
-    from pmsm_sysid.topics import INPUT_TYPES, OUTPUT_TYPES, STAT_TOPICS
+    from pmsm_sysid.topics import (
+        DIAGNOSIS_COUNTS,
+        DIAGNOSIS_PARAMS,
+        INPUT_TYPES,
+        OUTPUT_TYPES,
+        STAT_TOPICS,
+    )
 
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     rows = {f"`<ns>/{n}` | `{t}`" for n, t in {**INPUT_TYPES, **OUTPUT_TYPES}.items()}
     rows |= {f"`<ns>/stats/<output>/{q}` | `{t}` | {u} |" for q, (t, u, _) in
              STAT_TOPICS.items()}
     rows.add("`/diagnostics` | `diagnostic_msgs/msg/DiagnosticArray`")
+    rows |= {f"`<ns>/stats/diagnosis/{q}` | `{t}` | {u} |" for q, (t, u, _) in
+             DIAGNOSIS_COUNTS.items()}
+    rows |= {f"| `{effect}` | " + ", ".join(f"`{p}` ({u})" for p, u in params) + " |"
+             for effect, params in DIAGNOSIS_PARAMS.items()}
     missing = [r for r in rows if r not in readme]
     assert not missing, missing
 
