@@ -34,12 +34,13 @@ setup(
     description="Online NARX identification and GFRF analysis of a linear PMSM servo (ROS 2).",
     license="Apache-2.0",
     entry_points={
-        # the tool, and one executable per node (`ros2 run pmsm_sysid sim|identifier|gfrf`,
+        # the tool, one executable per node (`ros2 run pmsm_sysid sim|identifier|gfrf|diagnose`,
         # launch files); colcon installs them in lib/pmsm_sysid (setup.cfg), pip in bin/
         "console_scripts": ["pmsm-sysid = pmsm_sysid.cli:main",
                             "sim = pmsm_sysid.nodes.executables:sim",
                             "identifier = pmsm_sysid.nodes.executables:identifier",
-                            "gfrf = pmsm_sysid.nodes.executables:gfrf"],
+                            "gfrf = pmsm_sysid.nodes.executables:gfrf",
+                            "diagnose = pmsm_sysid.nodes.executables:diagnose"],
         # fixtures ros_env, ros_context, ros_executor, sim_motor for any project's tests
         "pytest11": ["pmsm_sysid = pmsm_sysid.testing.pytest_plugin"],
     },

@@ -22,7 +22,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
-EXECUTABLES = ("gfrf", "identifier", "pmsm-sysid", "sim")
+EXECUTABLES = ("diagnose", "gfrf", "identifier", "pmsm-sysid", "sim")
 
 CHECK = """
 import json, sys

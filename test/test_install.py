@@ -79,7 +79,7 @@ def test_base_install_has_no_ros_and_the_ros_extra_has_the_locked_wheels(
     assert ros and all(name.startswith("ros-jazzy-") and name in lock for name in ros), ros
 
 
-EXECUTABLES = ("gfrf", "identifier", "pmsm-sysid", "sim")
+EXECUTABLES = ("diagnose", "gfrf", "identifier", "pmsm-sysid", "sim")
 
 
 def test_the_venvs_editable_install_puts_the_executables_on_its_path() -> None:

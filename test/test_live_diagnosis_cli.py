@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -71,3 +72,55 @@ def test_run_with_a_live_diagnosis_reports_it(ros_env: int, tmp_path: Path) -> N
     assert "Live run: diagnosis over time" in (rep / "index.html").read_text()
     # no stale-input warning although the sim waited for the diagnoses
     assert "stale input" not in proc.stderr
+
+
+def test_the_diagnose_executable_refuses_a_bad_reference(ros_env: int, tmp_path: Path) -> None:
+    exe = Path(sys.executable).parent / "diagnose"
+    for args, match in ((["-p", "plant_file:=no_such.yaml"], "no_such.yaml: no such plant file"),
+                        ([], "exactly one reference")):
+        proc = subprocess.run([str(exe), "--ros-args", *args], env=_env(ros_env, tmp_path),
+                              capture_output=True, text=True, timeout=120)
+        lines = proc.stderr.strip().splitlines()
+        assert proc.returncode == 2 and len(lines) == 1 and match in lines[0], proc.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_the_diagnose_executable_diagnoses_the_drive_it_listens_to(
+        ros_env: int, tmp_path: Path, ros_context: Any, ros_executor: Any,
+        sim_motor: Any) -> None:
+    """``ros2 run pmsm_sysid diagnose --ros-args -r __ns:=/d1 -p plant_file:=nominal``: the
+    node alone in its process, diagnosing a drive on /d1 (here the simulated one, 2 s spans)
+    and publishing on /d1/diagnosis; SIGTERM ends it cleanly."""
+    import signal
+
+    from rclpy.node import Node
+    from std_msgs.msg import String
+
+    from pmsm_sysid.testing import spin_until
+
+    got: list[dict[str, Any]] = []
+    probe = Node("probe", context=ros_context)
+    probe.create_subscription(String, "/d1/diagnosis", lambda m: got.append(json.loads(m.data)),
+                              10)
+    ros_executor.add_node(probe)
+    exe = Path(sys.executable).parent / "diagnose"
+    proc = subprocess.Popen([str(exe), "--ros-args", "-r", "__ns:=/d1", "-p",
+                             "plant_file:=nominal", "-p", "span_s:=2.0", "-p", "period_s:=2.0"],
+                            env=_env(ros_env, tmp_path), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        spin_until(ros_executor, lambda: probe.count_publishers("/d1/diagnosis") > 0,
+                   timeout_s=120)
+        sim_motor(namespace="/d1", plant="drive", excitation="broadband")
+        spin_until(ros_executor, lambda: len(got) >= 1, timeout_s=600)
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=120)
+        ros_executor.remove_node(probe)
+        probe.destroy_node()
+    assert proc.returncode == 0 and "Traceback" not in err, err
+    assert "/d1/pmsm_diagnose" in err
+    d = got[0]
+    assert d["reference"] == "plant_file" and d["plant_file"] == "nominal"
+    assert d["window"]["samples"] == 1000 and d["window"]["sample_rate_hz"] == pytest.approx(500)

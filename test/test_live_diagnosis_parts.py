@@ -150,6 +150,7 @@ def test_the_health_warns_while_physics_is_missing_and_when_spans_are_lost() -> 
                                          "skipped (diagnoses slower than period_s)")
 
 
+@pytest.mark.slow
 def test_the_run_report_draws_each_effect_over_time(tmp_path: Any) -> None:
     from pmsm_sysid.report.build import kind_of, report_summary
 

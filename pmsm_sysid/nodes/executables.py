@@ -1,4 +1,4 @@
-"""One node per process: the executables ``sim``, ``identifier`` and ``gfrf``.
+"""One node per process: the executables ``sim``, ``identifier``, ``gfrf`` and ``diagnose``.
 
 After ``colcon build`` they are in ``install/pmsm_sysid/lib/pmsm_sysid/``, where ``ros2 run``
 and launch files look, so a user's own launch file composes the pipeline node by node::
@@ -6,6 +6,7 @@ and launch files look, so a user's own launch file composes the pipeline node by
     ros2 run pmsm_sysid sim
     ros2 run pmsm_sysid identifier --ros-args -r __ns:=/axis2 --params-file tune.yaml
     ros2 run pmsm_sysid gfrf --ros-args -r __ns:=/axis2
+    ros2 run pmsm_sysid diagnose --ros-args -p plant_file:=my_drive.yaml   # or sim_namespace:=/twin
 
 Each starts its node (``/pmsm/pmsm_sim``, ``/pmsm/pmsm_identifier``, ``/pmsm/pmsm_gfrf``:
 the pipeline's namespace, ``-r __ns:=/x`` moves it) on a private rclpy context with the
@@ -17,8 +18,9 @@ arguments: one line on stderr, exit 2.
 
 Defaults are those of ``pmsm-sysid run``: the sim is the packaged ``drive`` plant under
 ``broadband`` excitation on the wall clock (any plant-file key, ``excitation``,
-``amplitude_n``, ``seed`` ... as a parameter); the identifier and GFRF node have their own
-parameter defaults (``ros2 param describe`` lists them).
+``amplitude_n``, ``seed`` ... as a parameter); the identifier, GFRF and diagnosis nodes have
+their own parameter defaults (``ros2 param describe`` lists them); the diagnosis node needs
+its reference, ``plant_file`` or ``sim_namespace``.
 """
 
 from __future__ import annotations
@@ -37,6 +39,9 @@ NODE_HELP = {
                   "JointState topic): models on <ns>/model, validation, change events",
     "gfrf": "GFRFs and ridges of each model on <ns>/model: <ns>/ridges, "
             "<ns>/ridge_frequencies",
+    "diagnose": "live sim-to-real diagnosis of <ns>/thrust, speed, position against a plant "
+                "file (-p plant_file:=PLANT.yaml) or a simulator's topics (-p "
+                "sim_namespace:=/twin): <ns>/diagnosis, <ns>/stats/diagnosis/...",
 }
 EPILOG = """\
 ROS arguments after --ros-args, as for any ROS 2 executable, e.g.
@@ -57,6 +62,10 @@ def _make(kind: str, context: Any) -> Any:
         from .identifier_node import IdentifierNode
 
         return IdentifierNode(context=context, namespace=DEFAULT_NAMESPACE)
+    if kind == "diagnose":
+        from .diagnosis_node import DiagnosisNode
+
+        return DiagnosisNode(context=context, namespace=DEFAULT_NAMESPACE)
     from .gfrf_node import GfrfNode
 
     return GfrfNode(context=context, namespace=DEFAULT_NAMESPACE)
@@ -94,7 +103,7 @@ def _spin(kind: str, ros_args: list[str]) -> None:
         node = session.add(_make(kind, session.context))
         node.get_logger().info(f"{kind} node {node.get_fully_qualified_name()} running")
         session.spin_for(None)
-        if kind == "identifier":
+        if kind in ("identifier", "diagnose"):
             node.publish_results()  # what the worker finished before the stop
 
 
@@ -109,5 +118,6 @@ def _entry(kind: str) -> Callable[[], int]:
 sim = _entry("sim")
 identifier = _entry("identifier")
 gfrf = _entry("gfrf")
+diagnose = _entry("diagnose")
 
-__all__ = ["gfrf", "identifier", "run_node", "sim"]
+__all__ = ["diagnose", "gfrf", "identifier", "run_node", "sim"]
