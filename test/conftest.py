@@ -17,7 +17,9 @@ that needs ROS and is not marked ``ros`` fails there.
 
 from __future__ import annotations
 
+import json
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -60,6 +62,10 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--without-ros", action="store_true",
                      help="run as without ROS: deselect the 'ros' tests; rclpy and the ROS "
                           "message packages cannot be imported here or in subprocesses")
+    parser.addoption("--cpu-report", metavar="FILE", default=None,
+                     help="append one JSON line per test to FILE: its CPU seconds (user + "
+                          "sys of the test process and of the processes it started and "
+                          "waited for, set-up and teardown included) and wall seconds")
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -107,6 +113,31 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             items[:] = [item for item in items if not item.get_closest_marker("ros")]
     slow_modules = {item.path for item in items if item.get_closest_marker("slow")}
     items.sort(key=lambda item: item.path not in slow_modules)  # stable: order otherwise kept
+
+
+def _cpu_now() -> float:
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> object:
+    """With ``--cpu-report FILE``: each test's CPU (a module or session fixture's set-up
+    counts in the first test that uses it) and wall time, one JSON line per test."""
+    target = item.config.getoption("--cpu-report")
+    if not target:
+        yield
+        return
+    import time
+
+    cpu, wall = _cpu_now(), time.monotonic()
+    yield
+    line = {"test": item.nodeid, "cpu_s": round(_cpu_now() - cpu, 3),
+            "wall_s": round(time.monotonic() - wall, 3),
+            "worker": os.environ.get("PYTEST_XDIST_WORKER", "main")}
+    with open(target, "a", encoding="utf-8") as out:
+        out.write(json.dumps(line) + "\n")
 
 
 @pytest.fixture(scope="session")
