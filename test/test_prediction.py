@@ -92,3 +92,59 @@ def test_bad_inputs_raise_data_errors() -> None:
         free_run(model, u, np.zeros(2))
     with pytest.raises(DataError, match="k >= 1"):
         k_step_ahead(model, u, u, 0)
+
+
+def _plain_free_run(model: NarxModel, u: np.ndarray, y_init: np.ndarray,
+                    bound: float) -> tuple[list[float], int | None]:
+    """Eq. 12 as the plain loop over samples, terms and factors (the reference)."""
+    lag = model.max_lag
+    y = [*map(float, y_init[:lag]), *([0.0] * (len(u) - lag))]
+    terms = [(float(th), t.y_lags, t.u_lags) for t, th in zip(model.terms, model.estimates,
+                                                              strict=True)]
+    for k in range(lag, len(u)):
+        acc = 0.0
+        for theta, ylags, ulags in terms:
+            v = theta
+            for i in ylags:
+                v *= y[k - i]
+            for j in ulags:
+                v *= float(u[k - j])
+            acc += v
+        if not abs(acc) <= bound:
+            return y[:k], k
+        y[k] = acc
+    return y, None
+
+
+def _random_model(rng: np.random.Generator) -> NarxModel:
+    """Up to 8 distinct terms in random order: a constant, pure input, pure output and mixed
+    terms of degree 1 or 2, lags 1-12."""
+    factors = [*(f"y(k-{i})" for i in range(1, 13)), *(f"u(k-{j})" for j in range(1, 13))]
+    names = {"const"}
+    while len(names) < 8:
+        names.add("".join(sorted(rng.choice(factors, size=rng.integers(1, 3)))))
+    order = rng.permutation(sorted(names))
+    return NarxModel.from_dict({
+        "terms": [{"name": str(n), "estimate": float(rng.normal(scale=0.3))} for n in order],
+        "structure": {"ny": 12, "nu": 12, "degree": 2, "delay": 1}})
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_unrolled_free_run_is_the_plain_loop_bit_for_bit(seed: int) -> None:
+    """Random structures on inputs that keep them bounded and on ones that make them
+    diverge (a small bound): the same floats and the same divergence index."""
+    rng = np.random.default_rng(seed)
+    diverged = bounded = 0
+    for _ in range(8):
+        model = _random_model(rng)
+        u = rng.normal(size=400)
+        y0 = rng.normal(scale=0.1, size=model.max_lag)
+        for bound in (1e6, 0.5):
+            ref, at = _plain_free_run(model, u, y0, bound)
+            got = run(model, u, y0, limit=bound)
+            assert got.diverged_at == at and got.diverged == (at is not None)
+            assert got.y[: len(ref)].tolist() == ref  # the same floats, not close ones
+            assert np.isnan(got.y[len(ref):]).all()
+            diverged += at is not None
+            bounded += at is None
+    assert diverged >= 4 and bounded >= 4  # both paths are exercised

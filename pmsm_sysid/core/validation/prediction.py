@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -98,6 +99,39 @@ def _compiled(model: NarxModel) -> list[tuple[float, tuple[int, ...], tuple[int,
     return [(float(th), t.y_lags, t.u_lags) for t, th in pairs]
 
 
+_Structure = tuple[tuple[tuple[int, ...], tuple[int, ...]], ...]
+
+
+@lru_cache(maxsize=512)
+def _recursion(key: _Structure) -> Callable[..., int]:
+    """The free run's loop for one model structure (the (output lags, input lags) of each
+    term), unrolled into one Python function: term by term in the model's order, each
+    term's factors multiplied left to right after its estimate (theta * y(k-i)... *
+    u(k-j)...) and added to 0.0 in order, so the numbers are those of the plain loop bit
+    for bit. A term without output factors is read from an array the caller computed
+    (elementwise, in the same order). ``_run(y, exo, u, bound, start, *estimates)`` fills
+    ``y`` from ``start`` on and returns the first sample out of bounds, or -1."""
+    parts = []
+    for i, (ylags, ulags) in enumerate(key):
+        if not ylags:
+            parts.append(f"e{i}[k]")
+        else:
+            parts.append("*".join([f"t{i}", *(f"y[k-{a}]" for a in ylags),
+                                   *(f"u[k-{b}]" for b in ulags)]))
+    args = "".join(f", t{i}" for i in range(len(key)))
+    pure = "".join(f"    e{i} = exo[{i}]\n" for i, (ylags, _) in enumerate(key) if not ylags)
+    src = (f"def _run(y, exo, u, bound, start{args}):\n{pure}"
+           f"    for k in range(start, len(y)):\n"
+           f"        acc = {' + '.join(['0.0', *parts])}\n"
+           f"        if not -bound <= acc <= bound:  # also catches NaN\n"
+           f"            return k\n"
+           f"        y[k] = acc\n"
+           f"    return -1\n")
+    scope: dict[str, Callable[..., int]] = {}
+    exec(compile(src, f"<free run of {len(key)} terms>", "exec"), scope)
+    return scope["_run"]
+
+
 def simulate(
     model: NarxModel, u: FloatArray, y_init: FloatArray, limit: float | None = None
 ) -> FreeRun:
@@ -117,21 +151,23 @@ def simulate(
     scale = max(1.0, float(np.max(np.abs(y0), initial=0.0)))
     bound = limit if limit is not None else DIVERGENCE_FACTOR * scale
     terms = _compiled(model)
-    yl: list[float] = [*y0.tolist(), *([0.0] * (len(u) - lag))]
-    ul: list[float] = u.tolist()
-    for k in range(lag, len(u)):
-        acc = 0.0
-        for theta, ylags, ulags in terms:
-            v = theta
-            for i in ylags:
-                v *= yl[k - i]
-            for j in ulags:
-                v *= ul[k - j]
-            acc += v
-        if not abs(acc) <= bound:  # also catches NaN
-            out = np.array(yl[:k] + [np.nan] * (len(u) - k))
-            return FreeRun(y=out, diverged=True, diverged_at=k)
-        yl[k] = acc
+    thetas = [theta for theta, _, _ in terms]
+    fn = _recursion(tuple((ylags, ulags) for _, ylags, ulags in terms))
+    n = len(u)
+    exo: list[list[float] | None] = []
+    for theta, term in zip(thetas, model.terms, strict=True):
+        if term.y_lags:
+            exo.append(None)
+            continue
+        v = np.full(n, theta)
+        for j in term.u_lags:
+            v[j:] *= u[: n - j]
+        exo.append(v.tolist())
+    yl: list[float] = [*y0.tolist(), *([0.0] * (n - lag))]
+    stop = fn(yl, exo, u.tolist(), bound, lag, *thetas)
+    if stop >= 0:
+        out = np.array(yl[:stop] + [np.nan] * (n - stop))
+        return FreeRun(y=out, diverged=True, diverged_at=stop)
     return FreeRun(y=np.array(yl), diverged=False, diverged_at=None)
 
 
