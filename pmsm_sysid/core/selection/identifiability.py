@@ -134,20 +134,24 @@ def _band(f: FloatArray, p: FloatArray, res: float) -> tuple[float, float]:
     return lo, hi
 
 
+_LOCAL = np.r_[-24:-8, 9:25]  # the neighbourhood of a line, the line's own +-8 bins left out
+
+
 def _lines(p: FloatArray) -> list[int]:
     """Indices of narrow spectral lines (see the module docstring)."""
     peaks, _ = find_peaks(np.concatenate(([0.0], p, [0.0])))
     peaks = peaks - 1
-    top = float(p.max())
-    out: list[int] = []
-    for i in peaks:
-        if p[i] <= top * 10 ** (-LINE_DB_BELOW_MAX / 10):
-            continue
+    peaks = peaks[p[peaks] > float(p.max()) * 10 ** (-LINE_DB_BELOW_MAX / 10)]
+    local = np.zeros(len(peaks))
+    inner = (peaks >= 24) & (peaks + 25 <= len(p))  # the whole neighbourhood inside
+    if inner.any():
+        local[inner] = np.median(p[peaks[inner, None] + _LOCAL], axis=1)
+    for n in np.flatnonzero(~inner):
+        i = int(peaks[n])
         idx = np.r_[max(i - 24, 0):max(i - 8, 0), min(i + 9, len(p)):min(i + 25, len(p))]
-        local = float(np.median(p[idx])) if len(idx) else 0.0
-        if p[i] >= local * 10 ** (LINE_DB_OVER_LOCAL / 10):
-            out.append(int(i))
-    return out
+        local[n] = float(np.median(p[idx])) if len(idx) else 0.0
+    keep = p[peaks] >= local * 10 ** (LINE_DB_OVER_LOCAL / 10)
+    return [int(i) for i in peaks[keep]]
 
 
 def _refine(x: FloatArray, fs: float, f0: float, res: float) -> float:
