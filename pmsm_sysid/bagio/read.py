@@ -115,6 +115,8 @@ _VALUE: dict[str, Callable[[Any], float]] = {
 #: (log-time start, log-time stop, header-stamp lo, header-stamp hi) in ns, any None: one
 #: span of a long recording (messages outside it are skipped, not held).
 Window = tuple[int | None, int | None, int, int]
+#: Every message (a stamp may be negative: a jittered clock starting at zero).
+_WHOLE: Window = (None, None, -(2**63), 2**63 - 1)
 
 
 def _read_triple(reader: Any, chosen: dict[str, str], until: int | None,
@@ -125,7 +127,7 @@ def _read_triple(reader: Any, chosen: dict[str, str], until: int | None,
     conns = [c for c in reader.connections if c.topic in by_topic]
     # the fast path only for the stock definitions (same type hash as ROS 2 Jazzy, or none)
     fast = {c.id for c in conns if c.digest in ("", store.hash_rihs01(c.msgtype))}
-    start, stop, lo, hi = window or (None, None, 0, 2**63 - 1)
+    start, stop, lo, hi = window or _WHOLE
     for conn, _, data in reader.messages(connections=conns, start=start, stop=stop):
         stamps, values = streams[by_topic[conn.topic]]
         got = decode_stamped(data) if conn.id in fast else None
@@ -158,7 +160,7 @@ def _read_joint(path: Path, reader: Any, topic: str, joint_name: str | None,
     seen: set[str] = set()
     conns = [c for c in reader.connections if c.topic == topic]
     stopped = False
-    start, stop, lo, hi = window or (None, None, 0, 2**63 - 1)
+    start, stop, lo, hi = window or _WHOLE
     for conn, _, data in reader.messages(connections=conns, start=start, stop=stop):
         msg: Any = store.deserialize_cdr(data, conn.msgtype)
         k = _joint_index(list(msg.name), joint_name, seen)
