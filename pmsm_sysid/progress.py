@@ -39,10 +39,12 @@ ENV = "PMSM_SYSID_PROGRESS"
 _quiet = False
 
 
-def silence(quiet: bool = True) -> None:
-    """No bars from now on in this process (the verbs' ``--quiet``)."""
+def silence(quiet: bool = True) -> bool:
+    """No bars from now on in this process (the verbs' ``--quiet``); returns the previous
+    setting, to restore it."""
     global _quiet
-    _quiet = quiet
+    previous, _quiet = _quiet, quiet
+    return previous
 
 
 def enabled(stream: TextIO | None = None) -> bool:

@@ -294,3 +294,16 @@ def test_core_never_imports_matplotlib() -> None:
     assert r.returncode == 0, r.stderr
     n, bad = r.stdout.split(" ", 1)
     assert int(n) > 20 and bad.strip() == "[]", r.stdout
+
+
+def test_a_verbs_quiet_lasts_as_long_as_the_verb(tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """``main([..., '--quiet'])`` called in-process silences the bars for that call only:
+    the caller's bars draw again afterwards."""
+    from pmsm_sysid.cli import main
+
+    monkeypatch.delenv("PMSM_SYSID_PROGRESS", raising=False)
+    assert main(["identify", str(tmp_path / "missing_bag"), "--quiet"]) == 2
+    out = _Tty()
+    list(progress(iter(range(3)), total=3, label="bag", stream=out))
+    assert "3/3" in out.getvalue()

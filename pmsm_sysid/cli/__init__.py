@@ -108,10 +108,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.verb in ROS_VERBS and ros_missing() is not None:
         print(f"pmsm-sysid {args.verb}: error: this verb {NO_ROS}", file=sys.stderr)
         return 2
-    if getattr(args, "quiet", False):
-        from ..progress import silence
+    from ..progress import silence
 
-        silence()
+    was_quiet = silence(True) if getattr(args, "quiet", False) else None
     try:
         check_ros_args(ros_args)  # before any work: a missing params file is bad input
         check_outputs(args, args._outputs)  # before any work: a long run must not end unwritten
@@ -131,6 +130,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except BrokenPipeError:
         return 0
+    finally:
+        if was_quiet is not None:  # the bars' setting of the caller (main called in-process)
+            silence(was_quiet)
 
 
 if __name__ == "__main__":  # pragma: no cover
