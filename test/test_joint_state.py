@@ -104,6 +104,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
                           text=True, timeout=600)
 
 
+@pytest.mark.slow
 def test_identify_and_diagnose_read_the_robots_bag(tmp_path: Path) -> None:
     """The offline verbs find the JointState layout by themselves; among several joints
     ``--joint`` names the axis, and the numbers are those of the same samples on the three
