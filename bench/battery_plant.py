@@ -48,6 +48,7 @@ class Truth:
     dead_zone: float = 0.0
     periodic: tuple[float, float] = (0.0, 0.25)  # amplitude, frequency
     process: float | None = None  # process force std overriding the noise level's
+    thrust_noise: float = 0.0  # thrust sensor noise std (N): recorded, not applied
 
 
 @dataclass(frozen=True)
@@ -103,8 +104,9 @@ def _actuator(tr: Truth, u: float) -> float:
 class Drive:
     """State (x, v, lagged force), stepped one sample with the command held."""
 
-    def __init__(self, truth: Truth, rng: np.random.Generator, process_std: float) -> None:
-        self.tr, self.rng, self.w_std = truth, rng, process_std
+    def __init__(self, truth: Truth, rng: np.random.Generator, process_std: float,
+                 fs: float = FS) -> None:
+        self.tr, self.rng, self.w_std, self.fs = truth, rng, process_std, fs
         self.x = self.v = self.f = 0.0
         self.t = 0.0
 
@@ -118,7 +120,7 @@ class Drive:
     def step(self, cmd: float) -> None:
         u = _actuator(self.tr, cmd)
         w = self.w_std * float(self.rng.standard_normal())
-        h = 1.0 / (FS * SUB)
+        h = 1.0 / (self.fs * SUB)
         x, v, f, t = self.x, self.v, self.f, self.t
         for _ in range(SUB):
             k1 = self._deriv(x, v, f, u, w, t)
@@ -134,37 +136,42 @@ class Drive:
         self.x, self.v, self.f, self.t = x, v, f, t
 
 
-def _excitation(kind: str, seed: int, amplitude: float | None = None) -> FloatArray:
-    return make_excitation(kind, N, FS, seed=1000 + seed, amplitude_n=amplitude)
+def _excitation(kind: str, seed: int, amplitude: float | None = None, n: int = N,
+                fs: float = FS) -> FloatArray:
+    return make_excitation(kind, n, fs, seed=1000 + seed, amplitude_n=amplitude)
 
 
-def record(case: Case, seed: int) -> Recording:
-    """Simulate ``case`` with noise/excitation ``seed`` (the held-out run uses another)."""
+def record(case: Case, seed: int, fs: float = FS, n: int = N) -> Recording:
+    """Simulate ``case`` with noise/excitation ``seed`` (the held-out run uses another), at
+    ``fs`` for ``n`` samples."""
     sv, sx, sw = NOISE[case.noise]
     sw = case.truth.process if case.truth.process is not None else sw
     rng = np.random.default_rng(seed)
-    drive = Drive(case.truth, rng, sw)
-    t = np.arange(N) / FS
-    thrust, speed, position = np.empty(N), np.empty(N), np.empty(N)
+    drive = Drive(case.truth, rng, sw, fs)
+    t = np.arange(n) / fs
+    thrust, speed, position = np.empty(n), np.empty(n), np.empty(n)
     if case.loop == "open":
-        exc = _excitation(case.excitation, seed) + 3.0 * np.cos(2 * math.pi * 0.5 * t)
+        exc = _excitation(case.excitation, seed, None, n, fs) + 3.0 * np.cos(
+            2 * math.pi * 0.5 * t)
     else:
-        exc = _excitation(case.excitation, seed, 6.0)
+        exc = _excitation(case.excitation, seed, 6.0, n, fs)
         ref = 0.02 * np.sin(2 * math.pi * 0.4 * t) + 0.004 * np.sin(2 * math.pi * 1.7 * t + 0.7)
         ref *= np.where(t < 0.5, 0.5 * (1 - np.cos(np.pi * t / 0.5)), 1.0)
-        vref = np.gradient(ref) * FS
+        vref = np.gradient(ref) * fs
         w = 2 * math.pi * 15.0
         kp, kd, ki = M0 * w * w, 2 * 0.7 * w * M0 - B0, 0.1 * M0 * w ** 3
     integral = 0.0
-    for k in range(N):
+    for k in range(n):
         speed[k] = drive.v + sv * rng.standard_normal()
         position[k] = round((drive.x + sx * rng.standard_normal()) / 1e-6) * 1e-6
         if case.loop == "open":
-            thrust[k] = exc[k]
+            cmd = exc[k]
         else:
             err = ref[k] - position[k]
-            integral += err / FS
-            thrust[k] = kp * err + kd * (vref[k] - speed[k]) + ki * integral + exc[k]
-        drive.step(thrust[k])
-    return Recording(t=t, thrust=thrust, speed=speed, position=position, sample_rate_hz=FS,
+            integral += err / fs
+            cmd = kp * err + kd * (vref[k] - speed[k]) + ki * integral + exc[k]
+        thrust[k] = cmd + case.truth.thrust_noise * rng.standard_normal() \
+            if case.truth.thrust_noise else cmd
+        drive.step(cmd)
+    return Recording(t=t, thrust=thrust, speed=speed, position=position, sample_rate_hz=fs,
                      source="battery simulator", meta={"case": case.label})
