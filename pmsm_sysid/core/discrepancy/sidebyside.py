@@ -180,6 +180,9 @@ def _rigid_words(r: Change) -> str:
         what = f"{abs(rel):.0%} {'heavier' if rel > 0 else 'lighter'}"
         return (f"the real axis is {what} ({r.real:.4g} ± {r.std:.2g} kg against "
                 f"{r.sim:.4g} kg)")
+    if r.sim <= 0:
+        return (f"the real axis has {r.real:.4g} ± {r.std:.2g} N·s/m of viscous damping the "
+                "simulation lacks")
     what = f"{abs(rel):.0%} {'more' if rel > 0 else 'less'} viscous damping"
     return (f"the real axis has {what} ({r.real:.4g} ± {r.std:.2g} against {r.sim:.4g} "
             "N·s/m)")
