@@ -119,6 +119,13 @@ def _split(ex: Excerpt, split: float) -> tuple[tuple[Recording, ...], tuple[Reco
     return tuple(before), tuple(after)
 
 
+def estimation_parts(ex: Excerpt, held: Excerpt | None,
+                     split: float = SPLIT) -> tuple[Recording, ...]:
+    """The parts of ``ex`` the estimation uses: all of them beside a held-out recording
+    (``held``), else those before the cut at ``split`` (:func:`segments` splits the same)."""
+    return ex.parts if held is not None else _split(ex, split)[0]
+
+
 def _whole(parts: tuple[Recording, ...], ex: Excerpt, first: bool) -> Recording:
     """The parts as one recording: a window of the excerpt's joined recording (no copy)."""
     n = sum(len(p) for p in parts)
@@ -138,7 +145,7 @@ def segments(plant: Plant, real: Recording | Excerpt, validate: Recording | Exce
         if e is not None:
             check_finite(e.joined)
     if vex is None:
-        before, after = _split(ex, split)
+        before, after = _split(ex, split)  # as estimation_parts
         parts = {"estimation": before, "validation": after}
         recs = {"estimation": _whole(before, ex, True), "validation": _whole(after, ex, False)}
         used = {"recording": ex.describe(held_out=len(after) if not ex.whole else 0)}

@@ -48,7 +48,15 @@ from ..recording.signals import Recording, check_finite
 from ..recording.spans import Excerpt, Parts, as_parts
 from .estimate import Fit, design, refine
 from .feedback import FEEDBACK_Z, feedback_z, high_band
-from .fit import EffectsFit, FitOptions, Segments, excerpt_for, fit_effects, segments
+from .fit import (
+    EffectsFit,
+    FitOptions,
+    Segments,
+    estimation_parts,
+    excerpt_for,
+    fit_effects,
+    segments,
+)
 from .found import FoundEffect
 from .kinematics import (
     MIN_SAMPLES,
@@ -197,10 +205,12 @@ def _check_rigid_excitation(parts: list[Recording], spec: FilterSpec, label: str
             "multisine, PRBS or a positioning move)")
 
 
-def setup(rec: Parts) -> Setup:
-    """Filter, kinematic mode and loop of ``rec`` (or of its parts together) as
-    :func:`.fit.segments` chooses them."""
-    parts = as_parts(rec)
+def setup(est: Parts) -> Setup:
+    """Filter, kinematic mode and loop as :func:`.fit.segments` chooses them: from the
+    estimation part ``est`` (a recording, or the estimation spans of a long one;
+    :func:`.fit.estimation_parts`), so the iteration and the selection see the same
+    equation data."""
+    parts = as_parts(est)
     spec = choose_filter([p.speed for p in parts], parts[0].sample_rate_hz)
     fb = feedback_z(parts)
     closed = fb > FEEDBACK_Z
@@ -266,7 +276,7 @@ def fit_physical(rec: Recording | Excerpt, validate: Recording | Excerpt | None 
     ex = excerpt_for(rec, opts.max_samples, opts.split if validate is None else None)
     held = None if validate is None else excerpt_for(validate, opts.max_samples, None)
     parts = ex.parts
-    su = setup(parts)
+    su = setup(estimation_parts(ex, held, opts.split))
     ref, fit, data, its = _converge(parts, su, _crude(parts, su), START_EFFECTS)
     effects: tuple[Effect, ...] = ()
     rounds = 0
