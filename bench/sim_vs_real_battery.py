@@ -248,7 +248,13 @@ def run_case(item: Item) -> dict[str, Any]:
     real = record(real_case, item.seed, item.fs, n)
     held = record(real_case, item.seed + 100, item.fs, n)
     t0 = time.perf_counter()
-    res = diagnose_sim(sim, real, held, DiagnoseOptions(replay=False, gfrf=False))
+    try:
+        res = diagnose_sim(sim, real, held, DiagnoseOptions(replay=False, gfrf=False))
+    except Exception as exc:  # a case that fails is a wrong answer, not the end of the run
+        return {"case": item.label, "kind": item.kind, "role": kind.role, "right": False,
+                "named": [], "sim_only": [], "errors": [f"{type(exc).__name__}: {exc}"],
+                "changes": [], "heldout": "-", "false_alarm": kind.role == "control",
+                "seconds": time.perf_counter() - t0}
     out = judge(item, res.to_dict())
     out["seconds"] = time.perf_counter() - t0
     return out

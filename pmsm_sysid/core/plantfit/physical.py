@@ -7,14 +7,18 @@ rigid plant. The equation data, its instruments for the mass and viscous terms (
 and the friction calibration are all built *through* a reference plant
 (:mod:`.kinematics`), so the fit iterates:
 
-1. **Crude start.** Ordinary least squares of the parallel-filtered force on the filtered
-   acceleration, speed, a constant and sign(v) (an exactly linear inversion: reference mass
-   1 kg, no damping). Noise biases it (errors in variables); it only starts the iteration.
+1. **Crude start.** Two-stage least squares of the parallel-filtered force on the filtered
+   acceleration and speed, instrumented by the thrust's responses through mass-dampers of
+   time constants from five samples to a third of the recording (lagged by the filter's
+   memory under feedback), with a constant, sign(v) and the position beside them (an
+   exactly linear inversion: reference mass 1 kg, no damping). It only starts the
+   iteration: ordinary least squares, biased by noise and feedback, started a position
+   loop at a twentieth of the mass and the iteration never recovered.
 2. **Rigid iteration (IDIM-IV).** Against the rigid reference ``(M_k, B_k)`` the residual is
    regressed on the instrumented mass and viscous columns and the current effects (a
-   force offset and Coulomb friction as nuisance terms in the first round); the reference
-   moves to ``(M_k + ΔM, B_k + ΔB)`` until both steps are below a hundredth of their
-   standard errors (at most ``MAX_ITERATIONS``). The instruments are the responses of
+   force offset, Coulomb friction and a spring as nuisance terms in the first round); the
+   reference moves to ``(M_k + ΔM, B_k + ΔB)`` until both steps are below a hundredth of
+   their standard errors (at most ``MAX_ITERATIONS``). The instruments are the responses of
    mass-dampers with the reference's time constant (and half and twice it) to the
    recorded thrust, so each round makes them fit the axis better.
 3. **Effects.** The library is searched against the converged rigid plant: forward
@@ -58,6 +62,7 @@ from .fit import (
     segments,
 )
 from .found import FoundEffect
+from .instruments import instrumented
 from .kinematics import (
     MIN_SAMPLES,
     EquationData,
@@ -74,11 +79,15 @@ FloatArray = NDArray[np.float64]
 
 RIGID = (Effect("mass_error"), Effect("viscous_error"))
 RIGID_NAMES = ("mass_error", "viscous_error")
-#: Nuisance effects estimated with the mass and viscous terms before the selection.
-START_EFFECTS = (Effect("force_offset"), Effect("coulomb_friction"))
+#: Nuisance effects estimated with the mass and viscous terms before the selection: an
+#: offset, Coulomb friction and a spring (under a slow sinusoidal move a spring's force is
+#: in step with the acceleration and would pass for a negative mass).
+START_EFFECTS = (Effect("force_offset"), Effect("coulomb_friction"), Effect("spring"))
 MAX_ITERATIONS = 8
 STEP_TOLERANCE = 0.01  # of a standard error
 MAX_ROUNDS = 2
+#: Time constants of the crude start's instrument bank.
+CRUDE_TIME_CONSTANTS = 5
 #: Fewest samples a plant is fitted from (both the estimation and held-out parts need the
 #: equation data's minimum after the filter's edges are trimmed).
 MIN_PLANT_SAMPLES = 4 * MIN_SAMPLES
@@ -223,13 +232,34 @@ def rigid(mass: float, viscous: float, fs: float) -> Plant:
 
 
 def _crude(rec: Parts, su: Setup) -> Plant:
-    """Step 1 of the module doc: ordinary least squares through an exactly linear inversion."""
+    """Step 1 of the module doc: two-stage least squares through an exactly linear inversion.
+
+    The reference is 1 kg without damping, so the residual is linear in the mass and the
+    viscous coefficient. Their regressors (acceleration, speed) are replaced by their
+    projection on instruments built from the thrust alone -- the instrumented responses of
+    mass-dampers with time constants from five samples to a third of the recording (of its
+    longest span when used in spans; one filter memory older under feedback, as
+    :mod:`.instruments` builds them; each span's from its own thrust) -- beside a constant,
+    sign(v) and the position as exogenous columns.
+    """
     parts = as_parts(rec)
     fs = parts[0].sample_rate_hz
+    T = 1.0 / fs
     ref = Plant(mass_kg=1.0, viscous_n_per_mps=0.0, sample_rate_hz=fs)
     d = equation_data_parts(ref, parts, su.spec, su.mode, False)
-    cols = d.project(np.column_stack([d.a_raw, d.v_raw, np.ones(len(d.v)), d.friction()]))
-    beta, _ = lstsq(cols, d.y)
+    lag = su.spec.edge if su.closed else 0
+    longest = max(len(p) for p in parts)
+    taus = np.geomspace(5.0 * T, max(longest * T / 3.0, 50.0 * T), CRUDE_TIME_CONSTANTS)
+    bank = np.vstack([
+        np.column_stack([c for tau in taus
+                         for c in instrumented(p.thrust, T, float(tau), 1.0, su.mode,
+                                               d.a_raw[i:j], d.v_raw[i:j], lag)])
+        for p, (i, j) in zip(parts, d.instants(), strict=True)])
+    exog = d.project(np.column_stack([np.ones(len(d.v)), d.friction(), d.x]))
+    Z = np.hstack([d.project(bank), exog])
+    endog = d.project(np.column_stack([d.a_raw, d.v_raw]))
+    fitted = Z @ np.linalg.lstsq(Z, endog, rcond=None)[0]
+    beta, _ = lstsq(np.hstack([fitted, exog]), d.y)
     mass = 1.0 + float(beta[0])
     if not math.isfinite(mass) or mass <= 0:
         mass = 1.0
@@ -303,8 +333,11 @@ def fit_physical(rec: Recording | Excerpt, validate: Recording | Excerpt | None 
 
 
 def _reference_of(ref: Plant, fit: Fit) -> Plant:
-    """The rigid plant with the last mass and viscous steps applied."""
-    return rigid(ref.mass_kg + float(fit.beta[0]), ref.viscous_n_per_mps + float(fit.beta[1]),
+    """The rigid plant with the last mass and viscous steps applied (a step to a mass at or
+    below zero is not taken: an unmodelled force in step with the acceleration -- a spring
+    under a slow sinusoidal move -- can drive the rigid fit there before it is named)."""
+    mass = ref.mass_kg + float(fit.beta[0])
+    return rigid(mass if mass > 0 else ref.mass_kg, ref.viscous_n_per_mps + float(fit.beta[1]),
                  ref.sample_rate_hz)
 
 
