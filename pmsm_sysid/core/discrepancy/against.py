@@ -29,20 +29,23 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..errors import DiagnoseError, PmsmSysidError
 from ..physics.plant import Plant
 from ..plantfit.found import FoundEffect
 from ..plantfit.kinematics import EquationData, thinned, thinned_times
+from ..plantfit.library import Effect, columns
 from ..plantfit.parts import equation_data_parts
 from ..plantfit.physical import PhysicalFit, plant_and_std
 from ..plantfit.stats import HeldOutTest, held_out_test, nrmse
 from ..recording.signals import Recording
 from ..recording.spans import Excerpt
-from .changes import Change, compare, found_by_name
+from .changes import RIGID_PARAMS, Change, compare, found_by_name
 from .diagnose import DiagnoseOptions, cap_on_replay
 from .fitted import PlantFitResult, fit_plant
 from .gfrf_compare import gfrf_where
+from .nonparam import AxisModel
 from .resim import choose_horizon
 from .resim import compare as replay_compare
 from .result import Curves, DiagnoseResult
@@ -50,6 +53,7 @@ from .showfit import replay_notes, where_table
 from .sidebyside import SimComparison, apply_changes, beyond_sim, groups, sim_only
 
 SEGMENTS = ("estimation", "validation")
+FloatArray = NDArray[np.float64]
 
 
 def diagnose_sim(sim: Recording | Excerpt, real: Recording | Excerpt,
@@ -70,32 +74,34 @@ def _against(sim_rec: Recording | Excerpt, real_rec: Recording | Excerpt,
     sim = fit_plant(sim_rec, None, opts)
     real = fit_plant(real_rec, validate, opts)
     rows, notes, n_tests = compare(sim.physical, real.physical, opts.alpha)
+    rows, notes = _rigid_cap(rows, sim, real), notes + _rigid_note(rows, sim, real)
     real_est = plant_and_std(real.physical.reference, real.physical.est_joint)[0]
-    before = {s: _data(sim.plant, real.physical, s) for s in SEGMENTS}
-    judged = _judge(rows, sim.plant, real_est, real.physical, before)
+    res = Residuals(sim.plant, real.physical)
+    judged = _judge(rows, real_est, res)
     rows = judged.rows
+    more, less, left_notes = _unexplained(sim, real)
     corrected_est = apply_changes(sim.plant, real_est, rows)
-    after = {s: _data(corrected_est, real.physical, s) for s in SEGMENTS}
-    table, replays = _table(sim.plant, corrected_est, before, after, real.physical, opts)
+    table, replays, after = _table(corrected_est, res, opts, _best_curve(more))
     rows, capped = _cap(rows, table)
     effects = beyond_sim(rows, sim.plant, real.plant, found_by_name(real.physical),
                          judged.held, judged.shares)
     only = sim_only(rows, found_by_name(sim.physical), judged.held, judged.shares, sim.plant)
-    more, less, left_notes = _unexplained(sim, real)
-    found, replay_capped = cap_on_replay(effects + more, table)
+    found, replay_capped = cap_on_replay(effects + [e for e, _ in more], table)
     notes += judged.notes + capped + replay_capped + left_notes
     notes += replay_notes(table, list(groups(rows)))
     notes += [f"simulation's recording: {n}" for n in sim.notes]
     notes += [f"real recording: {n}" for n in real.notes]
     pieces = real.physical.segs.pieces("estimation")
     gfrf = gfrf_where(sim.plant, pieces[len(pieces) // 2], opts.alpha) if opts.gfrf else None
-    comparison = SimComparison(sim, real, tuple(rows), tuple(only + less), n_tests)
+    comparison = SimComparison(sim, real, tuple(rows), tuple(only + [e for e, _ in less]),
+                               n_tests)
     return DiagnoseResult(
         plant=sim.plant, corrected=apply_changes(sim.plant, real.plant, rows),
-        effects=tuple(found), where=tuple(where_table(before["estimation"], [])),
+        effects=tuple(found), where=tuple(where_table(res.before["estimation"], [])),
         nrmse_before=table["estimation"]["nrmse_before"], fit=table, candidates=(),
         method=_method(sim, real, n_tests, opts, validate is not None),
-        notes=tuple(notes), curves=_curves(before, after, judged.parts, replays), gfrf=gfrf,
+        notes=tuple(notes), curves=_curves(res.before, after, judged.parts, replays),
+        gfrf=gfrf,
         against=comparison)
 
 
@@ -107,31 +113,64 @@ def _data(plant: Plant, pf: PhysicalFit, segment: str) -> EquationData:
                                pf.setup.closed)
 
 
-def _table(sim_plant: Plant, corrected: Plant, before: dict[str, EquationData],
-           after: dict[str, EquationData], pf: PhysicalFit, opts: DiagnoseOptions,
-           ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
-    """Force NRMSE before/after on both segments, and the speed replay when asked."""
+class Residuals:
+    """Force residuals of the simulation's plant, changed or not, on the real recording.
+
+    A changed mass or viscous coefficient enters through the instrumented columns of the
+    simulation plant's equation data (as ``diagnose``'s mass and viscous errors do): the
+    measured acceleration and speed carry the sensors' noise, and an equation error
+    rebuilt with another mass carries that much more of it -- on a noisy speed the true
+    mass gave a larger residual than a wrong one. Changed effects are rebuilt exactly.
+    """
+
+    def __init__(self, sim_plant: Plant, pf: PhysicalFit) -> None:
+        self.sim, self.pf = sim_plant, pf
+        self.before = {s: _data(sim_plant, pf, s) for s in SEGMENTS}
+        self._rigid = {s: (columns(Effect("mass_error"), d)[:, 0],
+                           columns(Effect("viscous_error"), d)[:, 0])
+                       for s, d in self.before.items()}
+
+    def __call__(self, plant: Plant, segment: str) -> FloatArray:
+        """The residual of ``plant`` (the simulation's with some changes) on ``segment``."""
+        same = replace(plant, mass_kg=self.sim.mass_kg,
+                       viscous_n_per_mps=self.sim.viscous_n_per_mps)
+        y = self.before[segment].y if same == self.sim else _data(same, self.pf, segment).y
+        a, v = self._rigid[segment]
+        out: FloatArray = y - (plant.mass_kg - self.sim.mass_kg) * a \
+            - (plant.viscous_n_per_mps - self.sim.viscous_n_per_mps) * v
+        return out
+
+
+def _table(corrected: Plant, res: Residuals, opts: DiagnoseOptions,
+           extra: AxisModel | None = None,
+           ) -> tuple[dict[str, Any], dict[str, dict[str, Any]], dict[str, FloatArray]]:
+    """Force NRMSE before/after on both segments (after: the corrected plant, with the
+    real recording's best confirmed unexplained curve, as ``diagnose`` shows it), the
+    speed replay when asked, and the residuals after."""
     table: dict[str, Any] = {}
     replays: dict[str, dict[str, Any]] = {}
+    after: dict[str, FloatArray] = {}
+    recs = res.pf.segs.recs
+
     def sizes(seg: str) -> tuple[int, ...]:
-        pieces = pf.segs.pieces(seg)
+        pieces = res.pf.segs.pieces(seg)
         return tuple(len(p) for p in pieces) if len(pieces) > 1 else ()
 
-    horizon = choose_horizon((sim_plant, corrected), pf.segs.recs["estimation"],
+    horizon = choose_horizon((res.sim, corrected), recs["estimation"],
                              parts=sizes("estimation")) if opts.replay else None
     for seg in SEGMENTS:
-        b, a = before[seg], after[seg]
+        b = res.before[seg]
         target = b.project(b.force)
+        after[seg] = res(corrected, seg) - (extra.force(b) if extra is not None else 0.0)
         row: dict[str, Any] = {"nrmse_before": nrmse(target, b.y),
-                               "nrmse_after": nrmse(target, a.y), "samples": b.n}
+                               "nrmse_after": nrmse(target, after[seg]), "samples": b.n}
         if horizon is not None:
-            rec = pf.segs.recs[seg]
-            cmp = replay_compare(sim_plant, corrected, rec, horizon, sizes(seg))
+            cmp = replay_compare(res.sim, corrected, recs[seg], horizon, sizes(seg))
             row["output_error"] = cmp.to_dict()
-            replays[seg] = {"t": rec.t, "measured": rec.speed, "before": cmp.before.speed,
-                            "after": cmp.after.speed}
+            replays[seg] = {"t": recs[seg].t, "measured": recs[seg].speed,
+                            "before": cmp.before.speed, "after": cmp.after.speed}
         table[seg] = row
-    return table, replays
+    return table, replays, after
 
 
 def _cap(rows: list[Change], table: dict[str, Any]) -> tuple[list[Change], list[str]]:
@@ -157,8 +196,7 @@ class Judged:
     notes: list[str]
 
 
-def _judge(rows: list[Change], sim_plant: Plant, real_est: Plant, pf: PhysicalFit,
-           before: dict[str, EquationData]) -> Judged:
+def _judge(rows: list[Change], real_est: Plant, res: Residuals) -> Judged:
     """Each effect's changes judged on held-out real data, as ``diagnose`` judges effects:
     the simulation's plant with every change applied (real values estimated on the
     estimation part) against the same without this effect's changes (Diebold-Mariano on
@@ -169,9 +207,9 @@ def _judge(rows: list[Change], sim_plant: Plant, real_est: Plant, pf: PhysicalFi
     kept = list(rows)
     while True:
         by = groups(kept)
-        y_all = {s: _data(apply_changes(sim_plant, real_est, kept), pf, s).y for s in SEGMENTS}
-        minus = {n: {s: _data(apply_changes(sim_plant, real_est, [r for r in kept
-                                                                  if r.effect != n]), pf, s).y
+        y_all = {s: res(apply_changes(res.sim, real_est, kept), s) for s in SEGMENTS}
+        minus = {n: {s: res(apply_changes(res.sim, real_est,
+                                          [r for r in kept if r.effect != n]), s)
                      for s in SEGMENTS} for n in by}
         tests = {n: held_out_test(minus[n]["validation"], y_all["validation"]) for n in by}
         failing = [(t.z, n) for n, t in tests.items() if not t.confirmed]
@@ -182,10 +220,11 @@ def _judge(rows: list[Change], sim_plant: Plant, real_est: Plant, pf: PhysicalFi
                      f"data (mean-square error {-tests[worst].reduction:+.0%}); it is not "
                      "reported")
         kept = [r for r in kept if r.effect != worst]
-    e0 = float(before["estimation"].y @ before["estimation"].y)
+    y0 = res.before["estimation"].y
+    e0 = float(y0 @ y0)
     shares = {}
     for n, rs in by.items():
-        y = _data(apply_changes(sim_plant, real_est, rs), pf, "estimation").y
+        y = res(apply_changes(res.sim, real_est, rs), "estimation")
         shares[n] = max(0.0, 1.0 - float(y @ y) / e0) if e0 > 0 else 0.0
     parts = {s: [(n, minus[n][s] - y_all[s]) for n in by] for s in SEGMENTS}
     kept = [replace(r, confidence=_held_confidence(r.confidence, tests[r.effect].p_value))
@@ -201,17 +240,46 @@ def _held_confidence(confidence: str, p_value: float) -> str:
     return confidence
 
 
+Curve = tuple[FoundEffect, AxisModel]
+
+
 def _unexplained(sim: PlantFitResult, real: PlantFitResult,
-                 ) -> tuple[list[FoundEffect], list[FoundEffect], list[str]]:
+                 ) -> tuple[list[Curve], list[Curve], list[str]]:
     """Unexplained structure on an axis only one recording shows goes to that side."""
-    def axes(f: PlantFitResult) -> dict[str, FoundEffect]:
-        return {str(e.params.get("axis")): e for e in f.effects if e.name == "unexplained"}
+    def axes(f: PlantFitResult) -> dict[str, Curve]:
+        return {str(e.params.get("axis")): (e, m) for e, m in f.curves}
 
     s_ax, r_ax = axes(sim), axes(real)
     notes = [f"both recordings show structure over {a} that no library effect explains; "
              "it is not compared" for a in r_ax if a in s_ax]
-    return ([e for a, e in r_ax.items() if a not in s_ax],
-            [e for a, e in s_ax.items() if a not in r_ax], notes)
+    return ([c for a, c in r_ax.items() if a not in s_ax],
+            [c for a, c in s_ax.items() if a not in r_ax], notes)
+
+
+def _best_curve(curves: list[Curve]) -> AxisModel | None:
+    """The real-only curve that lowers the held-out error most (for the fit table)."""
+    ok = [(e.held_out.reduction, m) for e, m in curves
+          if e.held_out is not None and e.held_out.significant]
+    return max(ok, key=lambda t: t[0])[1] if ok else None
+
+
+def _rigid_cap(rows: list[Change], sim: PlantFitResult,
+               real: PlantFitResult) -> list[Change]:
+    """No 'high' mass or viscous change when a curve over thrust or speed explains one of
+    the recordings better than (or beside) its rigid part."""
+    if not (sim.rigid_capped or real.rigid_capped):
+        return rows
+    return [replace(r, confidence="moderate") if r.effect in RIGID_PARAMS
+            and r.confidence == "high" else r for r in rows]
+
+
+def _rigid_note(rows: list[Change], sim: PlantFitResult, real: PlantFitResult) -> list[str]:
+    if not (sim.rigid_capped or real.rigid_capped) or not any(
+            r.effect in RIGID_PARAMS and r.confidence == "high" for r in rows):
+        return []
+    side = "real" if real.rigid_capped else "simulated"
+    return [f"mass and viscous changes are not 'high': a curve over thrust or speed explains "
+            f"the {side} recording better than its rigid part alone"]
 
 
 def _method(sim: PlantFitResult, real: PlantFitResult, n_tests: int, opts: DiagnoseOptions,
@@ -230,14 +298,14 @@ def _method(sim: PlantFitResult, real: PlantFitResult, n_tests: int, opts: Diagn
     return m
 
 
-def _curves(before: dict[str, EquationData], after: dict[str, EquationData],
+def _curves(before: dict[str, EquationData], after: dict[str, FloatArray],
             parts: dict[str, list[tuple[str, Any]]],
             replays: dict[str, dict[str, Any]]) -> Curves:
     c = Curves()
     for seg in SEGMENTS:
         d = before[seg]
         c.t[seg], c.x[seg], c.v[seg] = thinned_times(d), thinned(d, d.x), thinned(d, d.v)
-        c.before[seg], c.after[seg] = d.y, after[seg].y
+        c.before[seg], c.after[seg] = d.y, after[seg]
         c.parts[seg] = parts[seg]
     c.replay.update(replays)
     return c

@@ -5,7 +5,11 @@ viscous damping always, the library's effects by selection) and then judges the 
 against its own fitted plant as ``diagnose`` judges it against a given one: structure left
 in the residual that no library effect explains is modelled as a curve on its axis
 (:func:`.showfit.scan_unexplained`) and reported as ``unexplained`` -- never written into
-the plant file, which has no block for it. The fit table is the force (equation-error)
+the plant file, which has no block for it. Each library group is also put against a curve
+on its axis (:func:`.rival.rivals`): when a curve predicts the held-out data better, or a
+confirmed curve explains what is left on an effect's axis, that effect is not 'high' (as in
+``diagnose``) -- and when that axis is the thrust or the speed, neither are the mass and
+viscous damping (:attr:`PlantFitResult.rigid_capped`). The fit table is the force (equation-error)
 NRMSE of the rigid part alone (mass and viscous damping) and of the whole fitted plant, on
 the estimation data and on held-out data, both with the parameters estimated on the
 estimation data only.
@@ -13,7 +17,7 @@ estimation data only.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -27,8 +31,12 @@ from ..plantfit.physical import PhysicalFit, fit_physical
 from ..plantfit.stats import nrmse
 from ..recording.signals import Recording
 from ..recording.spans import Excerpt
+from .nonparam import AxisModel
+from .rival import AXIS_EFFECTS, Rival, as_found, rivals
 from .showfit import scan_unexplained
 from .words import used_lines
+
+RIGID_NAMES = ("mass_error", "viscous_error")
 
 
 @dataclass(frozen=True)
@@ -41,6 +49,11 @@ class PlantFitResult:
     fit: dict[str, Any]
     method: dict[str, Any]
     notes: tuple[str, ...] = ()
+    curves: tuple[tuple[FoundEffect, AxisModel], ...] = ()
+    """The ``unexplained`` entries with their curves (confirmed on held-out data)."""
+    rigid_capped: bool = False
+    """A curve over thrust or speed explains held-out data better than, or beside, the
+    rigid part: the mass and viscous damping are not the whole story there."""
 
     @property
     def plant(self) -> Plant:
@@ -86,26 +99,51 @@ def fit_plant(rec: Recording | Excerpt, validate: Recording | Excerpt | None = N
     opts = opts or FitOptions()
     try:
         pf = fit_physical(rec, validate, opts)
-        left = leftover(pf, opts)
+        curves = leftover(pf, opts)
+        rv = rivals(pf.est_joint, pf.segs.est, pf.segs.val, not pf.setup.closed, opts.alpha)
     except PmsmSysidError:
         raise
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise DiagnoseError(f"fitting a plant failed on these data: {exc}") from exc
+    found, near = capped(pf.found, curves, rv)
+    beaten = {r.axis for r in rv}
+    curves = [(e, m) for e, m in curves if e.params.get("axis") not in beaten]
+    curves += [(as_found(r), r.model) for r in rv]
     notes = list(pf.notes)
-    if left:
+    if curves:
         notes.append("unexplained structure is reported, not written into the plant file "
                      "(a plant file has no block for it)")
-    return PlantFitResult(pf, pf.found + tuple(left), fit_rows(pf), method(pf, opts,
-                          validate is not None), tuple(notes))
+    pf = replace(pf, found=tuple(found))
+    return PlantFitResult(pf, pf.found + tuple(e for e, _ in curves), fit_rows(pf),
+                          method(pf, opts, validate is not None), tuple(notes),
+                          tuple(curves), bool(near & set(RIGID_NAMES)))
 
 
-def leftover(pf: PhysicalFit, opts: FitOptions) -> list[FoundEffect]:
-    """``unexplained`` entries for structure the fitted plant leaves in its residual,
-    confirmed on held-out data (a curve that does not lower the held-out error is
-    dropped)."""
+def leftover(pf: PhysicalFit, opts: FitOptions) -> list[tuple[FoundEffect, AxisModel]]:
+    """``unexplained`` entries (with their curves) for structure the fitted plant leaves in
+    its residual, confirmed on held-out data (a curve that does not lower the held-out
+    error is dropped)."""
     curves = scan_unexplained(pf.joint, pf.data, opts.alpha, opts.min_share,
                               (pf.est_joint, pf.segs.est), pf.segs.val, pf.setup.closed)
-    return [e for e, _ in curves if e.held_out is None or e.held_out.confirmed]
+    return [(e, m) for e, m in curves if e.held_out is None or e.held_out.confirmed]
+
+
+def capped(found: tuple[FoundEffect, ...], curves: list[tuple[FoundEffect, AxisModel]],
+           rv: list[Rival]) -> tuple[list[FoundEffect], set[str]]:
+    """No 'high' for an effect on an axis where a curve confirmed on held-out data explains
+    what is left, or predicts the held-out data better than the effects there (as
+    ``diagnose``); returns the effects and every library name so capped."""
+    axes = {m.axis for e, m in curves if e.held_out is not None and e.held_out.significant}
+    near = {n for a in axes for n in AXIS_EFFECTS.get(a, ())}
+    near |= {n for r in rv for n in r.replaced}
+    out = []
+    for e in found:
+        if e.name in near and e.confidence == "high":
+            e = replace(e, confidence="moderate", notes=(*e.notes, (
+                "an unexplained force remains on its axis and a curve explains held-out "
+                "data better than this effect alone: it is part of the story at most")))
+        out.append(e)
+    return out, near
 
 
 def fit_rows(pf: PhysicalFit) -> dict[str, Any]:
@@ -144,4 +182,4 @@ def method(pf: PhysicalFit, opts: FitOptions, has_validate: bool) -> dict[str, A
     }
 
 
-__all__ = ["PlantFitResult", "fit_plant", "fit_rows", "leftover", "method"]
+__all__ = ["PlantFitResult", "capped", "fit_plant", "fit_rows", "leftover", "method"]
