@@ -25,8 +25,8 @@ class PlantFit:
     Example:
         >>> import pmsm_sysid as ps
         >>> fit = ps.fit_plant("bags/paper_speed_coulomb")
-        >>> round(fit.plant.mass_kg, 1), [e.name for e in fit.effects]
-        (2.3, ['coulomb_friction'])
+        >>> round(fit.plant.mass_kg, 1), fit.plant.effects  # the blocks written
+        (2.3, ('coulomb_friction',))
         >>> sorted(fit.to_dict())[:4]
         ['effects', 'fit', 'method', 'notes']
     """

@@ -5,8 +5,10 @@ viscous damping always, the library's effects by selection) and then judges the 
 against its own fitted plant as ``diagnose`` judges it against a given one: structure left
 in the residual that no library effect explains is modelled as a curve on its axis
 (:func:`.showfit.scan_unexplained`) and reported as ``unexplained`` -- never written into
-the plant file, which has no block for it. Each library group is also put against a curve
-on its axis (:func:`.rival.rivals`): when a curve predicts the held-out data better, or a
+the plant file, which has no block for it; the thrust axis is scanned in either loop, for a
+bend beyond a straight line over thrust (:func:`leftover`). Each library group is also put
+against a curve on its axis (:func:`.rival.rivals`; the mass and viscous terms are the
+plant's own and are never replaced): when a curve predicts the held-out data better, or a
 confirmed curve explains what is left on an effect's axis, that effect is not 'high' (as in
 ``diagnose``) -- and when that axis is the thrust or the speed, neither are the mass and
 viscous damping (:attr:`PlantFitResult.rigid_capped`). The fit table is the force (equation-error)
@@ -100,7 +102,8 @@ def fit_plant(rec: Recording | Excerpt, validate: Recording | Excerpt | None = N
     try:
         pf = fit_physical(rec, validate, opts)
         curves = leftover(pf, opts)
-        rv = rivals(pf.est_joint, pf.segs.est, pf.segs.val, not pf.setup.closed, opts.alpha)
+        rv = rivals(pf.est_joint, pf.segs.est, pf.segs.val, not pf.setup.closed, opts.alpha,
+                    never=RIGID_NAMES)
     except PmsmSysidError:
         raise
     except (ValueError, np.linalg.LinAlgError) as exc:
@@ -122,10 +125,18 @@ def fit_plant(rec: Recording | Excerpt, validate: Recording | Excerpt | None = N
 def leftover(pf: PhysicalFit, opts: FitOptions) -> list[tuple[FoundEffect, AxisModel]]:
     """``unexplained`` entries (with their curves) for structure the fitted plant leaves in
     its residual, confirmed on held-out data (a curve that does not lower the held-out
-    error is dropped)."""
+    error is dropped). The thrust axis is scanned in either loop, against a straight line
+    over thrust as ``diagnose`` scans it under feedback: a fitted plant's rigid part takes
+    up what it can of a force over thrust (an actuator dead zone made the mass 10 % and
+    the damping 15 % larger), and a noisy thrust reading makes the residual lean on the
+    thrust in a straight line -- only a bend beyond it is the plant's. Open loop that
+    bend must lower the held-out error significantly: a noisy reading of a bounded thrust
+    (a sine's crests) bends the lean at the ends of the range too."""
     curves = scan_unexplained(pf.joint, pf.data, opts.alpha, opts.min_share,
-                              (pf.est_joint, pf.segs.est), pf.segs.val, pf.setup.closed)
-    return [(e, m) for e, m in curves if e.held_out is None or e.held_out.confirmed]
+                              (pf.est_joint, pf.segs.est), pf.segs.val, True)
+    return [(e, m) for e, m in curves if e.held_out is None or (
+        e.held_out.significant if m.axis == "thrust" and not pf.setup.closed
+        else e.held_out.confirmed)]
 
 
 def capped(found: tuple[FoundEffect, ...], curves: list[tuple[FoundEffect, AxisModel]],

@@ -68,15 +68,17 @@ def _fit(fit: Fit, keep: tuple[int, ...], est: EquationData, val: EquationData,
 
 
 def rivals(fit: Fit, est: EquationData, val: EquationData, thrust: bool,
-           alpha: float) -> list[Rival]:
-    """Curves that explain held-out data better than the library group on their axis."""
+           alpha: float, never: tuple[str, ...] = ()) -> list[Rival]:
+    """Curves that explain held-out data better than the library group on their axis
+    (``never``: effects never replaced -- a fitted plant's own mass and viscous terms)."""
     parts = contributions(fit, val)
     e_lib = val.y - (np.sum(parts, axis=0) if parts else 0.0)
     out = []
     for kind in ("position", "position_friction", "velocity", "thrust"):
         if kind == "thrust" and not thrust:
             continue
-        group = [k for k, e in enumerate(fit.effects) if e.name in AXIS_EFFECTS[kind]]
+        group = [k for k, e in enumerate(fit.effects)
+                 if e.name in AXIS_EFFECTS[kind] and e.name not in never]
         if not group:
             continue
         keep = tuple(k for k in range(len(fit.effects)) if k not in group)

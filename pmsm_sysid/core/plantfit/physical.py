@@ -25,18 +25,15 @@ and the friction calibration are all built *through* a reference plant
    selection by ERR, prewhitened F-tests with a Bonferroni correction, held-out
    confirmation, re-estimation on the whole recording -- the same statistics as
    ``diagnose``. The mass and viscous terms of the library are not reported as effects:
-   they are the plant's own parameters. The next round searches against the rigid plant
-   *with* the effects found so far (as ``diagnose`` searches against a plant file that has
-   them), so that a small effect beside a large one is judged by its share of what the
-   large one leaves, not of the whole: a 0.6 N cogging beside 2 N of Coulomb friction
-   explained 18.5 units of significance but only 0.997 % of the rigid plant's mismatch.
+   they are the plant's own parameters. An effect's share is of the rigid plant's
+   mismatch: beside a large friction a small effect must still explain ``min_share`` of
+   that.
 4. **Joint estimate.** Step 2 is repeated with the selected effects, all parameters
    together (nonlinear ones -- pitches, Stribeck velocity, lag -- refined by variable
    projection); standard errors are the sandwich covariance of :mod:`.estimate` (the
-   mass's and viscous coefficient's included). Steps 3-4 repeat (at most ``MAX_ROUNDS``)
-   while a round names a new effect, the mass or viscous coefficient moved by more than
-   one standard error from the reference the effects were selected against, or the
-   selection named a mass or viscous error.
+   mass's and viscous coefficient's included). If the mass or viscous coefficient moved by
+   more than one standard error from the reference the effects were selected against (or
+   the selection named a mass or viscous error), step 3 runs once more.
 
 The fitted plant's ``sample_rate_hz`` is the recording's; winding resistance, inductance and
 flux are not identified from a force balance and keep the nominal values.
@@ -90,7 +87,7 @@ RIGID_NAMES = ("mass_error", "viscous_error")
 START_EFFECTS = (Effect("force_offset"), Effect("coulomb_friction"), Effect("spring"))
 MAX_ITERATIONS = 8
 STEP_TOLERANCE = 0.01  # of a standard error
-MAX_ROUNDS = 3
+MAX_ROUNDS = 2
 #: Time constants of the crude start's instrument bank.
 CRUDE_TIME_CONSTANTS = 5
 #: Fewest samples a plant is fitted from (both the estimation and held-out parts need the
@@ -313,38 +310,25 @@ def fit_physical(rec: Recording | Excerpt, validate: Recording | Excerpt | None 
     parts = ex.parts
     su = setup(estimation_parts(ex, held, opts.split))
     ref, fit, data, its = _converge(parts, su, _crude(parts, su), START_EFFECTS)
-    effects: tuple[Effect, ...] = ()
-    named: dict[str, FoundEffect] = {}
     rounds = 0
     while True:
         rounds += 1
         sel_ref = _reference_of(ref, fit)
-        base = _plant_with(sel_ref, fit) if effects else sel_ref
-        segs = segments(base, ex, held, opts.split, opts.max_samples)
-        ef = fit_effects(base, segs, opts)
+        segs = segments(sel_ref, ex, held, opts.split, opts.max_samples)
+        ef = fit_effects(sel_ref, segs, opts)
         named_rigid = any(e.name in RIGID_NAMES for e in ef.final.effects)
-        new = tuple(e for e in ef.final.effects
-                    if e.name not in RIGID_NAMES and e.name not in named)
-        named.update({f.name: f for f in ef.found if any(e.name == f.name for e in new)})
-        ref, fit, data, n = _converge(parts, su, sel_ref, effects + new)
-        effects = fit.effects[len(RIGID):]
+        effects = tuple(e for e in ef.final.effects if e.name not in RIGID_NAMES)
+        ref, fit, data, n = _converge(parts, su, sel_ref, effects)
         its += n
         moved = _moved(sel_ref, ref, fit)
-        if rounds >= MAX_ROUNDS or not (new or moved or named_rigid):
+        if rounds >= MAX_ROUNDS or not (moved or named_rigid):
             break
     plant, std, notes = plant_and_std(ref, fit)
-    found = _found(tuple(named.values()), fit, ref)
+    found = _found(ef.found, fit, ref)
     final = segments(ref, ex, held, opts.split, opts.max_samples)
     est_joint = joint_fit(fit.effects[len(RIGID):], final.est)
     return PhysicalFit(plant, std, found, ref, fit, data, final, est_joint, ef, su, its,
                        rounds, tuple(notes))
-
-
-def _plant_with(base: Plant, fit: Fit) -> Plant:
-    """``base`` (rigid) with the effects of ``fit`` as plant blocks."""
-    named = [(fit.effects[k].name, effect_params(fit, k, base)[0])
-             for k in range(len(RIGID), len(fit.effects))]
-    return corrected_plant(base, named)[0]
 
 
 def _reference_of(ref: Plant, fit: Fit) -> Plant:
