@@ -129,11 +129,13 @@ def leftover(pf: PhysicalFit, opts: FitOptions) -> list[tuple[FoundEffect, AxisM
     over thrust as ``diagnose`` scans it under feedback: a fitted plant's rigid part takes
     up what it can of a force over thrust (an actuator dead zone made the mass 10 % and
     the damping 15 % larger), and a noisy thrust reading makes the residual lean on the
-    thrust in a straight line -- only a bend beyond it is the plant's. Open loop that
-    bend must lower the held-out error significantly: a noisy reading of a bounded thrust
-    (a sine's crests) bends the lean at the ends of the range too."""
+    thrust in a straight line -- only a bend beyond it is the plant's. Open loop a noisy
+    reading of a bounded thrust (a chirp's or a sine's crests) bends the lean at the ends
+    of the range too: there the curve is judged beyond the line and that bend
+    (:func:`.nonparam.noise_lean`), and must lower the held-out error significantly."""
     curves = scan_unexplained(pf.joint, pf.data, opts.alpha, opts.min_share,
-                              (pf.est_joint, pf.segs.est), pf.segs.val, True)
+                              (pf.est_joint, pf.segs.est), pf.segs.val, True,
+                              lean=not pf.setup.closed)
     return [(e, m) for e, m in curves if e.held_out is None or (
         e.held_out.significant if m.axis == "thrust" and not pf.setup.closed
         else e.held_out.confirmed)]

@@ -19,6 +19,16 @@ Under feedback the curve over thrust is fitted with a straight line over thrust 
 noise and the process force, which are in the residual too, so the residual leans on the
 thrust in a straight line whatever the plant (errors in variables); only a bend in the
 curve -- a dead zone, a saturation -- is the plant's.
+
+Open loop a noisy thrust *reading* bends that lean too: the noise ``n`` is in the residual
+and in the recorded thrust ``u = f + n``, and its mean given the reading is
+``E[n | u] = -s² d/du log p(u)`` (Tweedie's formula; ``p`` the density of the readings,
+``s`` the noise's deviation) -- a straight line for a Gaussian thrust, but steep at the
+ends of a bounded one (a chirp's or a sine's crests), where a reading beyond the range
+can only be noise. With ``lean`` that column (``p`` a kernel estimate of the readings'
+density, its coefficient free, so ``s`` need not be known) is fitted beside the line and
+the curve is judged against both: only a bend the readings' own distribution does not
+explain -- a dead zone in the middle of the range -- is the plant's.
 """
 
 from __future__ import annotations
@@ -38,6 +48,11 @@ from .local import FWHM, N_INTERVALS, best_bump, bump_column
 FloatArray = NDArray[np.float64]
 
 DEGREE = 3
+#: Kernel width of the readings' density for the noise lean, as a share of their
+#: interquartile range (fine enough for a noise of a few percent of the range).
+LEAN_BANDWIDTH = 0.03
+#: Grid steps per kernel width of the binned density estimate.
+LEAN_STEPS = 4
 UNITS = {"position": "m", "velocity": "m/s", "thrust": "N", "time": "s",
          "position_friction": "m", "position_local": "m"}
 
@@ -56,6 +71,17 @@ class AxisModel:
     line0: float = 0.0  # ... and fitted alone
     inner: tuple[float, float] | None = None  # 5-95 % of the axis values (thrust turns)
     bump: tuple[float, float] = (0.0, 0.0)  # position_local: centre and σ (m)
+    lean: float | None = None  # the thrust reading's noise lean fitted with the curve ...
+    lean0: float = 0.0  # ... and with the line alone
+
+    def _beside(self, data: EquationData, line: float | None, lean: float) -> FloatArray:
+        """The line and noise lean (coefficients given) at the regression samples."""
+        out: FloatArray = np.zeros(data.n)
+        if line is not None:
+            out = out + line * data.project(data.force)
+        if self.lean is not None:
+            out = out + lean * data.project(noise_lean(data.force))
+        return out
 
     def raw(self, data: EquationData) -> FloatArray:
         """Full-rate columns on ``data`` (values clipped to the fitted range)."""
@@ -74,16 +100,12 @@ class AxisModel:
     def force(self, data: EquationData) -> FloatArray:
         """The modelled force at the regression samples of ``data`` (with the line)."""
         out: FloatArray = data.project(self.raw(data)) @ self.coef
-        if self.line is not None:
-            out = out + self.line * data.project(data.force)
-        return out
+        return out + self._beside(data, self.line, self.lean or 0.0)
 
     def baseline(self, data: EquationData) -> FloatArray:
-        """The force of the line fitted alone (zero without one): the curve's rival."""
-        if self.line is None:
-            return np.zeros(data.n)
-        out: FloatArray = self.line0 * data.project(data.force)
-        return out
+        """The force of the line (and noise lean) fitted alone (zero without one): the
+        curve's rival."""
+        return self._beside(data, None if self.line is None else self.line0, self.lean0)
 
     def _describe_bump(self) -> dict[str, Any]:
         c, sig = self.bump
@@ -152,6 +174,26 @@ def axis_values(data: EquationData, axis: str) -> FloatArray:
     return out
 
 
+def noise_lean(vals: FloatArray) -> FloatArray:
+    """``-d/du log p(u)`` at each of ``vals``, ``p`` their own density (a Gaussian kernel
+    of ``LEAN_BANDWIDTH`` of their interquartile range, binned): the shape of a reading
+    noise's mean given the reading (module doc)."""
+    from scipy.ndimage import gaussian_filter1d
+
+    u = np.asarray(vals, dtype=np.float64)
+    q25, q75 = np.quantile(u, [0.25, 0.75])
+    h = LEAN_BANDWIDTH * float(q75 - q25) or 1e-9 * max(1.0, float(np.max(np.abs(u))))
+    step = h / LEAN_STEPS
+    lo = float(u.min()) - 4 * h
+    nbins = int(np.ceil((float(u.max()) + 4 * h - lo) / step)) + 1
+    counts = np.bincount(np.clip(((u - lo) / step).astype(int), 0, nbins - 1),
+                         minlength=nbins).astype(np.float64)
+    dens = gaussian_filter1d(counts, LEAN_STEPS, mode="constant")
+    score = -np.gradient(np.log(np.maximum(dens, 1e-300)), step)
+    out: FloatArray = np.interp(u, lo + step * np.arange(nbins), score)
+    return out
+
+
 def _basis(vals: FloatArray, lo: float, hi: float) -> FloatArray:
     inner = np.linspace(lo, hi, N_INTERVALS + 1)
     knots = np.concatenate([[lo] * DEGREE, inner, [hi] * DEGREE])
@@ -172,26 +214,37 @@ def _slow_line(r: FloatArray, t: FloatArray) -> float:
 
 
 def fit_axis(data: EquationData, y: FloatArray, base: FloatArray, axis: str,
-             line: bool = False) -> AxisModel:
+             line: bool = False, lean: bool = False) -> AxisModel:
     """Fit the curve of ``axis`` to ``y`` together with the columns ``base``."""
-    return fit_axis_with(data, y, base, axis, line)[0]
+    return fit_axis_with(data, y, base, axis, line, lean=lean)[0]
+
+
+def beside_thrust(data: EquationData, lean: bool) -> FloatArray:
+    """The columns fitted beside a curve over thrust: the line, and the noise lean."""
+    cols = [data.project(data.force)] + ([data.project(noise_lean(data.force))] if lean
+                                         else [])
+    return np.column_stack(cols)
 
 
 def fit_axis_with(data: EquationData, y: FloatArray, base: FloatArray, axis: str,
-                  line: bool = False, freq_hz: float = 0.0,
+                  line: bool = False, freq_hz: float = 0.0, lean: bool = False,
                   ) -> tuple[AxisModel, FloatArray, float]:
     """The curve, the coefficients of ``base`` fitted with it, and the residual energy.
 
     ``line`` (thrust only): a straight line over thrust is fitted beside the curve and
     kept in the model (module doc); its coefficient without the curve is kept too.
+    ``lean`` (with ``line``): so is the thrust reading's noise lean (module doc).
     ``freq_hz`` (time only): the sinusoid's frequency when known (a spectral line), else
     the strongest slow line.
     """
     m = base.shape[1]
     line0 = None
+    lean0 = None
     if line and axis == "thrust":
-        base = np.hstack([base, data.project(data.force)[:, None]])
-        line0 = float(lstsq(base, y)[0][m])
+        base = np.hstack([base, beside_thrust(data, lean)])
+        b0 = lstsq(base, y)[0]
+        line0 = float(b0[m])
+        lean0 = float(b0[m + 1]) if lean else None
     if axis == "time":
         _, r = lstsq(base, y)
         freq = freq_hz if freq_hz > 0 else _slow_line(r, thinned_times(data))
@@ -219,5 +272,6 @@ def fit_axis_with(data: EquationData, y: FloatArray, base: FloatArray, axis: str
     k = base.shape[1]
     return (AxisModel(axis, model.lo, model.hi, beta[k:], cov[k:, k:], model.freq_hz,
                       None if line0 is None else float(beta[m]), line0 or 0.0, model.inner,
-                      model.bump),
+                      model.bump, None if lean0 is None else float(beta[m + 1]),
+                      lean0 or 0.0),
             beta[:m], float(r @ r))

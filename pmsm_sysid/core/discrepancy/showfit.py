@@ -39,7 +39,7 @@ from ..plantfit.stats import (
 from ..validation.correlation import correlation_tests
 from .local import local_grid, local_share
 from .locate import AxisFinding, scan_axes
-from .nonparam import AxisModel, fit_axis, fit_axis_with
+from .nonparam import AxisModel, beside_thrust, fit_axis, fit_axis_with
 from .resim import Z_VERDICT, choose_horizon, compare
 
 FloatArray = NDArray[np.float64]
@@ -74,7 +74,7 @@ CURVE_KINDS = {"position": ("position", "position_friction", "position_local"),
 
 def scan_unexplained(fit: Fit, data: EquationData, alpha: float, min_share: float,
                      est: tuple[Fit, EquationData], val: EquationData, closed: bool,
-                     ) -> list[tuple[FoundEffect, AxisModel]]:
+                     lean: bool = False) -> list[tuple[FoundEffect, AxisModel]]:
     """Axes on which the final residual is still significantly structured, each with a
     curve fitted on the estimation data (:mod:`.nonparam`) and judged on held-out data.
 
@@ -84,7 +84,9 @@ def scan_unexplained(fit: Fit, data: EquationData, alpha: float, min_share: floa
     over all; the curves are smooth and pass through the parallel filter like every
     regressor, so they see what 16 bins blur. The most significant curve models the axis.
     Over thrust open loop only the rivals judge (:mod:`.rival`): a thrust sensor's noise
-    is in both the residual and the recorded thrust, and its bend needs no loop.
+    is in both the residual and the recorded thrust, and its bend needs no loop -- unless
+    ``lean`` (with ``closed``): the thrust is then scanned open loop against the line and
+    the reading noise's own bend beside it (:mod:`.nonparam`).
     """
     X, fixed = design(fit.effects, data)
     y = data.y - fixed
@@ -99,12 +101,12 @@ def scan_unexplained(fit: Fit, data: EquationData, alpha: float, min_share: floa
         sig, share = f.significance - np.log10(n_tests / (len(found) + 1)), f.share
         kinds = CURVE_KINDS[axis]
         if axis in axes:
-            sig_c, share_c, kind = _curve_evidence(axis, data, y, X, n_tests, closed)
+            sig_c, share_c, kind = _curve_evidence(axis, data, y, X, n_tests, closed, lean)
             sig, share, kinds = max(sig, sig_c), max(share, share_c), (kind,)
         if sig > -np.log10(alpha) and share >= min_share:
             model, held = _curve(kinds, est, val, closed,
                                  float(f.details.get("line_hz", 0.0)) if axis == "frequency"
-                                 else 0.0)
+                                 else 0.0, lean)
             text = f"structure over {axis} that no library effect explains"
             conf = "moderate" if held.significant else "low"
             out.append((FoundEffect(
@@ -114,15 +116,16 @@ def scan_unexplained(fit: Fit, data: EquationData, alpha: float, min_share: floa
 
 
 def _curve_evidence(axis: str, data: EquationData, y: FloatArray, X: FloatArray,
-                    n_tests: float, line: bool) -> tuple[float, float, str]:
+                    n_tests: float, line: bool, lean: bool = False,
+                    ) -> tuple[float, float, str]:
     """Significance (-log10 corrected p, null whitening), share and kind of the most
-    significant curve on ``axis``."""
+    significant curve on ``axis`` (over thrust: beyond the line and, with ``lean``, the
+    reading noise's bend)."""
     best = (0.0, 0.0, CURVE_KINDS[axis][0])
-    base = np.hstack([X, data.project(data.force)[:, None]]) if axis == "thrust" and line \
-        else X
+    base = np.hstack([X, beside_thrust(data, lean)]) if axis == "thrust" and line else X
     total = float(data.y @ data.y)
     for kind in CURVE_KINDS[axis]:
-        m = fit_axis(data, y, X, kind, line)
+        m = fit_axis(data, y, X, kind, line, lean)
         cols = data.project(m.raw(data))
         searched = local_grid(data)[1] if kind == "position_local" else 1.0
         test = nested_f_test(y, base, cols, null_whitening=True)
@@ -137,7 +140,8 @@ def _curve_evidence(axis: str, data: EquationData, y: FloatArray, X: FloatArray,
 
 
 def _curve(kinds: tuple[str, ...], est: tuple[Fit, EquationData], val: EquationData,
-           line: bool = False, freq_hz: float = 0.0) -> tuple[AxisModel, HeldOutTest]:
+           line: bool = False, freq_hz: float = 0.0,
+           lean: bool = False) -> tuple[AxisModel, HeldOutTest]:
     """The best curve of ``kinds`` on the estimation data (least residual energy), and its
     held-out test (against the line over thrust alone, when there is one). Over frequency
     the curve is the sinusoid at the line found (``freq_hz``)."""
@@ -145,7 +149,7 @@ def _curve(kinds: tuple[str, ...], est: tuple[Fit, EquationData], val: EquationD
     X, fixed = design(fit.effects, d)
     best: tuple[float, AxisModel] | None = None
     for kind in kinds:
-        m, _, sse = fit_axis_with(d, d.y - fixed, X, kind, line, freq_hz)
+        m, _, sse = fit_axis_with(d, d.y - fixed, X, kind, line, freq_hz, lean)
         if best is None or sse < best[0]:
             best = (sse, m)
     assert best is not None
