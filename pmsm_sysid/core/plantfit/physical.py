@@ -323,12 +323,33 @@ def fit_physical(rec: Recording | Excerpt, validate: Recording | Excerpt | None 
         moved = _moved(sel_ref, ref, fit)
         if rounds >= MAX_ROUNDS or not (moved or named_rigid):
             break
+    ref, fit, data, its, dropped = _dissipative(list(parts), su, ref, fit, data, its)
     plant, std, notes = plant_and_std(ref, fit)
     found = _found(ef.found, fit, ref)
+    notes += dropped
     final = segments(ref, ex, held, opts.split, opts.max_samples)
     est_joint = joint_fit(fit.effects[len(RIGID):], final.est)
     return PhysicalFit(plant, std, found, ref, fit, data, final, est_joint, ef, su, its,
                        rounds, tuple(notes))
+
+
+def _dissipative(parts: list[Recording], su: Setup, ref: Plant, fit: Fit, data: EquationData,
+                 its: int) -> tuple[Plant, Fit, EquationData, int, list[str]]:
+    """Friction takes energy out of the motion: a Stribeck hump beside a Coulomb level of the
+    other sign (or of a negative height) is the Coulomb and viscous friction over again
+    across the recorded speeds (a hump as wide as the motion is a slope), not a hump. It
+    is then left out and the rest fitted again; the note says so."""
+    plant, _, _ = plant_and_std(ref, fit)
+    cf, sf = plant.coulomb_friction, plant.stribeck_friction
+    if sf is None or (sf.static_n >= 0 and (cf is None or cf.amplitude_n >= 0)):
+        return ref, fit, data, its, []
+    effects = tuple(e for e in fit.effects[len(RIGID):] if e.name != "stribeck_friction")
+    ref, fit, data, n = _converge(parts, su, _crude(parts, su), effects)
+    coulomb = f", Coulomb {cf.amplitude_n:.3g} N" if cf is not None else ""
+    note = (f"a Stribeck hump of {sf.static_n:.3g} N at {sf.velocity_mps * 1e3:.3g} mm/s"
+            f"{coulomb} is not dissipative friction: across these speeds it stands for the "
+            "Coulomb and viscous friction, and is left out")
+    return ref, fit, data, its + n, [note]
 
 
 def _reference_of(ref: Plant, fit: Fit) -> Plant:
