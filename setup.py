@@ -22,7 +22,10 @@ setup(
     extras_require={
         "test": ["pytest", "pytest-xdist", "pytest-timeout", "hypothesis", "ruff", "mypy",
                  "types-PyYAML", "scipy-stubs", "pdoc", "colcon-core", "colcon-ros",
-                 "colcon-python-setup-py"],
+                 "colcon-python-setup-py", "dask[distributed]", "pyarrow"],
+        # `pmsm-sysid fleet` / ps.fleet: many recordings in parallel on Dask distributed (a
+        # local cluster or an existing one), the table in Parquet
+        "fleet": ["dask[distributed]", "pyarrow"],
         # the live verbs (run, record, replay, monitor) and the nodes: ROS 2 Jazzy wheels;
         # not needed where a ROS 2 Jazzy installation is sourced
         "ros": ["ros-jazzy-rclpy~=7.1", "ros-jazzy-rmw-fastrtps-cpp~=8.4",
