@@ -57,5 +57,9 @@ class OutputError(PmsmSysidError):
 SysIdError = PmsmSysidError
 
 
+class DependencyError(PmsmSysidError):
+    """An optional part of the package is asked for and its extra is not installed."""
+
+
 class OptionError(PmsmSysidError):
     """An option has a value outside its documented range (checked before any work starts)."""
