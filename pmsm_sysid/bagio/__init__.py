@@ -8,6 +8,7 @@ them without this package.
 - :func:`write_recording` / :func:`read_recording`: whole recordings (the three input topics);
   :func:`write_joint_states`: the same as one ros2_control ``JointState`` topic;
 - :func:`iter_raw`, :func:`bag_topics`: serialized messages in log order, for replay;
+- :func:`list_axes`: the axes a bag holds (namespaces, JointState joints);
 - :class:`BagRecorder`, :func:`repair`: streaming recording that survives being killed;
 - :func:`typestore`: ROS 2 Jazzy types plus the package's ``msg_schemas`` as
   ``pmsm_sysid/msg/<Name>``.
@@ -27,7 +28,7 @@ from .common import (
     typestore,
 )
 from .joint_write import write_joint_states
-from .read import bag_topics, iter_raw, read_recording
+from .read import bag_topics, iter_raw, list_axes, read_recording
 from .recorder import BagRecorder, repair, sigterm_as_exit
 from .schemas import encode_model_msg, encode_ridges_msg, encode_validation_msg
 from .write import write_recording
@@ -35,6 +36,7 @@ from .write import write_recording
 __all__ = [
     "DEFAULT_QOS", "FRAME_ID", "BagRecorder", "LoadedRecording", "RawMessage", "bag_topics",
     "connection_args", "encode_model_msg", "encode_ridges_msg", "encode_validation_msg",
-    "iter_raw", "open_reader", "read_recording", "repair", "schema_dir", "sigterm_as_exit",
-    "storage_plugin", "typestore", "write_joint_states", "write_recording",
+    "iter_raw", "list_axes", "open_reader", "read_recording", "repair", "schema_dir",
+    "sigterm_as_exit", "storage_plugin", "typestore", "write_joint_states",
+    "write_recording",
 ]

@@ -101,6 +101,27 @@ def _choose_layout(path: Path, found: dict[str, str], namespace: str | None) -> 
                    f"(topics: {_listing(found)})")
 
 
+def list_axes(path: str | Path) -> list[tuple[str, str | None]]:
+    """Every axis a bag holds, as ``(namespace, joint)``: one per ``<ns>/thrust`` +
+    ``<ns>/position`` pair (joint None), and one per joint of each ``JointState`` topic
+    (namespace = that topic; the joints are read from its first message). Read each with
+    ``read_recording(path, namespace=..., joint_name=...)``."""
+    suffix_t, suffix_p = "/" + tp.THRUST, "/" + tp.POSITION
+    with open_reader(path) as reader:
+        found = {c.topic: c.msgtype for c in reader.connections}
+        out: list[tuple[str, str | None]] = [
+            (t[: -len(suffix_t)] or "/", None) for t in sorted(found)
+            if t.endswith(suffix_t) and t[: -len(suffix_t)] + suffix_p in found]
+        store = typestore()
+        for topic in sorted(t for t, m in found.items() if m == tp.JOINT_STATE_TYPE):
+            conns = [c for c in reader.connections if c.topic == topic]
+            for conn, _, data in reader.messages(connections=conns):
+                msg: Any = store.deserialize_cdr(data, conn.msgtype)
+                out += [(topic, str(name)) for name in msg.name]
+                break
+    return out
+
+
 def _stamp_ns(msg: Any) -> int:
     return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
