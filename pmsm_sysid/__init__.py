@@ -19,6 +19,7 @@ Example:
 | `gfrf` → `GfrfAnalysis` | generalized frequency response functions, peaks, ridges |
 | `fit_plant` → `PlantFit` | the physical plant (mass, viscous, effects) of a recording |
 | `diagnose` → `Diagnosis` | which physics a plant (or a simulator's recording) leaves out |
+| `fleet` → `FleetResult` | many recordings on Dask: fitted plants, per-axis trends, alarms |
 | `PmsmSysidError` | base of every error raised on bad input |
 
 Each result's ``to_dict()`` is the JSON the matching ``pmsm-sysid`` verb writes.
@@ -35,14 +36,15 @@ from .core.errors import PmsmSysidError
 __version__ = "0.1.0"
 
 __all__ = [
-    "Diagnosis", "GfrfAnalysis", "Identification", "NarxModel", "Plant", "PlantFit",
-    "PmsmSysidError", "Recording", "diagnose", "fit_plant", "gfrf", "identify", "read_bag",
-    "simulate", "write_bag",
+    "Diagnosis", "FleetResult", "GfrfAnalysis", "Identification", "NarxModel", "Plant",
+    "PlantFit", "PmsmSysidError", "Recording", "diagnose", "fit_plant", "fleet", "gfrf",
+    "identify", "read_bag", "simulate", "write_bag",
 ]
 
 if TYPE_CHECKING:
     from .api import (
         Diagnosis,
+        FleetResult,
         GfrfAnalysis,
         Identification,
         NarxModel,
@@ -51,6 +53,7 @@ if TYPE_CHECKING:
         Recording,
         diagnose,
         fit_plant,
+        fleet,
         gfrf,
         identify,
         read_bag,

@@ -18,9 +18,9 @@ from __future__ import annotations
 import os
 import sys
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import TextIO, TypeVar
+from typing import Any, TextIO, TypeVar
 
 from rich.console import Console
 from rich.progress import (
@@ -28,11 +28,13 @@ from rich.progress import (
     MofNCompleteColumn,
     Progress,
     ProgressColumn,
+    Task,
     TaskProgressColumn,
     TextColumn,
     TimeElapsedColumn,
     TimeRemainingColumn,
 )
+from rich.text import Text
 
 T = TypeVar("T")
 ENV = "PMSM_SYSID_PROGRESS"
@@ -61,11 +63,22 @@ def enabled(stream: TextIO | None = None) -> bool:
         return False
 
 
-def _progress(stream: TextIO, counted: bool, auto: bool) -> Progress:
+class RateColumn(ProgressColumn):
+    """Items done per minute (rich's estimate over the last 30 s)."""
+
+    def render(self, task: Task) -> Text:
+        speed = task.finished_speed or task.speed
+        return Text("" if speed is None else f"{60 * speed:.3g}/min")
+
+
+def _progress(stream: TextIO, counted: bool, auto: bool, counts: Sequence[str] = (),
+              rate: bool = False) -> Progress:
     columns: list[ProgressColumn | str] = [TextColumn("{task.description}"), BarColumn()]
     if counted:
-        columns += [TaskProgressColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                    TimeRemainingColumn()]
+        columns += [TaskProgressColumn(), MofNCompleteColumn()]
+        columns += [TextColumn(f"{name} {{task.fields[{name}]}}") for name in counts]
+        columns += [RateColumn()] if rate else []
+        columns += [TimeElapsedColumn(), TimeRemainingColumn()]
     else:
         columns += [TimeElapsedColumn()]
     console = Console(file=stream, force_terminal=True, highlight=False, emoji=False)
@@ -74,10 +87,13 @@ def _progress(stream: TextIO, counted: bool, auto: bool) -> Progress:
 
 
 class Bar:
-    """A counted bar: ``update(n)`` adds n done; ``close()`` ends the line."""
+    """A counted bar: ``update(n)`` adds n done; ``close()`` ends the line. ``counts``:
+    names of further counters shown as ``name N`` (set with ``update(name=N)``); ``rate``:
+    show the items done per minute."""
 
     def __init__(self, total: int | None, label: str = "", stream: TextIO | None = None,
-                 min_interval: float = 0.1, force: bool | None = None) -> None:
+                 min_interval: float = 0.1, force: bool | None = None,
+                 counts: Sequence[str] = (), rate: bool = False) -> None:
         self.total = total
         self.label = label
         out = sys.stderr if stream is None else stream
@@ -88,15 +104,16 @@ class Bar:
         self._closed = False
         self._bar: Progress | None = None
         if self.on:
-            self._bar = _progress(out, counted=True, auto=False)
-            self._task = self._bar.add_task(label, total=total)
+            self._bar = _progress(out, counted=True, auto=False, counts=counts, rate=rate)
+            zeros: dict[str, Any] = dict.fromkeys(counts, 0)
+            self._task = self._bar.add_task(label, total=total, **zeros)
             self._bar.start()
 
-    def update(self, n: int = 1) -> None:
+    def update(self, n: int = 1, **counts: Any) -> None:
         self.done += n
         if self._bar is None:
             return
-        self._bar.update(self._task, completed=self.done)
+        self._bar.update(self._task, completed=self.done, **counts)
         now = time.monotonic()
         if now - self._last >= self.min_interval or self.done == self.total:
             self._last = now

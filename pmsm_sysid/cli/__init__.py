@@ -18,7 +18,7 @@ from typing import NoReturn
 
 VERBS = (
     "run", "simulate", "replay", "record", "monitor", "identify", "gfrf",
-    "diagnose", "fit-plant", "report", "import-mat",
+    "diagnose", "fit-plant", "fleet", "report", "import-mat",
 )
 
 

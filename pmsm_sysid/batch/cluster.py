@@ -1,0 +1,134 @@
+"""Where the fleet's work runs: a Dask distributed cluster (``dask.distributed``).
+
+Either a local cluster of worker processes started here (one thread each: the fits are
+numpy work that holds the interpreter), or an existing cluster reached through its scheduler
+address (``tcp://HOST:PORT``, started with ``dask scheduler`` and ``dask worker``), or a
+``Client`` the caller already holds. The same code submits the work to each.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from typing import TYPE_CHECKING, Any
+
+from ..core.errors import DependencyError, OptionError
+
+if TYPE_CHECKING:
+    from dask.distributed import Client
+
+    from .inputs import Unit
+
+EXTRA = "pip install 'pmsm_sysid[fleet]'"
+#: How long a scheduler address may take to answer, and workers to show up (s).
+CONNECT_TIMEOUT_S = 5.0
+WORKERS_TIMEOUT_S = 10.0
+
+
+def require_extra() -> None:
+    """DependencyError naming the ``[fleet]`` extra unless Dask distributed and pyarrow
+    import."""
+    missing = []
+    for module, package in (("dask.distributed", "dask[distributed]"), ("pyarrow", "pyarrow")):
+        try:
+            __import__(module)
+        except ImportError:
+            missing.append(package)
+    if missing:
+        raise DependencyError(f"fleet needs {' and '.join(missing)}, not installed here: "
+                              f"{EXTRA}")
+
+
+def _probe() -> str:
+    """Run on each worker: the package version it would analyse with."""
+    import pmsm_sysid
+
+    return pmsm_sysid.__version__
+
+
+def check_workers(client: Client, where: str, timeout_s: float = WORKERS_TIMEOUT_S) -> int:
+    """The number of workers, after checking there is one and each runs this package's
+    version (a worker without it would fail every recording)."""
+    import pmsm_sysid
+
+    try:
+        client.wait_for_workers(1, timeout=timeout_s)
+    except TimeoutError as exc:
+        raise OptionError(f"{where}: no worker joined within {timeout_s:g} s (start one with "
+                          "'dask worker ADDRESS')") from exc
+    try:
+        versions: Mapping[str, Any] = client.run(_probe)
+    except Exception as exc:
+        raise OptionError(f"{where}: a worker cannot run pmsm_sysid ({type(exc).__name__}: "
+                          f"{' '.join(str(exc).split())}); install it there: {EXTRA}") from exc
+    wrong = {w: v for w, v in versions.items() if v != pmsm_sysid.__version__}
+    if wrong:
+        w, v = next(iter(wrong.items()))
+        raise OptionError(f"{where}: worker {w} runs pmsm_sysid {v}, this is "
+                          f"{pmsm_sysid.__version__}: install the same version on every worker")
+    return len(versions)
+
+
+def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> Client:
+    """A client of the cluster whose scheduler listens at ``address``; OptionError (one
+    line) when it does not answer within ``timeout_s``."""
+    from dask.distributed import Client
+
+    try:
+        client = Client(address, timeout=timeout_s, set_as_default=False)
+    except Exception as exc:  # OSError (timeout, refused), ValueError (malformed address)
+        raise OptionError(f"--scheduler {address}: no Dask scheduler answers there within "
+                          f"{timeout_s:g} s ({' '.join(str(exc).split())})") from exc
+    try:
+        check_workers(client, f"--scheduler {address}")
+    except BaseException:
+        client.close()
+        raise
+    return client
+
+
+@contextmanager
+def local_cluster(workers: int) -> Iterator[Client]:
+    """A cluster of ``workers`` local worker processes, one thread each, no dashboard;
+    closed on exit."""
+    from dask.distributed import Client, LocalCluster
+
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=logging.ERROR)
+    try:
+        client = Client(cluster, set_as_default=False)
+        try:
+            yield client
+        finally:
+            client.close()
+    finally:
+        cluster.close()
+
+
+def run(client: Client, units: Sequence[Unit], task: Callable[..., dict[str, Any]],
+        options: Mapping[str, Any], on_row: Callable[[dict[str, Any]], None],
+        on_failure: Callable[[Unit, BaseException], dict[str, Any]]) -> None:
+    """Submit ``task(unit.path, namespace=, joint=, axis=, content_sha256=, **options)`` for
+    every unit and hand each row to ``on_row`` as it finishes (any order). A task that
+    raises (its worker died) gives ``on_failure(unit, exc)``'s row. On any exit (Ctrl-C
+    too) the tasks not finished are cancelled."""
+    from dask.distributed import as_completed
+
+    pending: dict[Any, Unit] = {}
+    for u in units:
+        fut = client.submit(task, u.path, namespace=u.namespace, joint=u.joint, axis=u.axis,
+                            content_sha256=u.content, pure=False, **options)
+        pending[fut] = u
+    try:
+        for fut in as_completed(list(pending), loop=client.loop):
+            unit = pending.pop(fut)
+            try:
+                row = fut.result()
+            except Exception as exc:  # the task itself never raises: its worker died
+                row = on_failure(unit, exc)
+            fut.release()
+            on_row(row)
+    finally:
+        if pending:
+            client.cancel(list(pending))
