@@ -285,7 +285,7 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
           out: str | os.PathLike[str] | None = None, resume: bool = False, force: bool = False,
           namespace: str | None = None, axis_from: str = "topic",
           min_duration: float = MIN_DURATION_S, alpha: float = 1e-3, min_share: float = 0.01,
-          baseline: int = 5, z: float = 4.0, min_change: float = 0.02,
+          baseline: int = 8, z: float = 4.0, min_change: float = 0.02,
           progress: Callable[[FleetProgress], None] | None = None) -> FleetResult:
     """Fit the physical plant of many recordings, diagnose a reference plant on each, in
     parallel on Dask, and follow every axis's parameters over time with drift alarms.
@@ -304,9 +304,9 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
     ``alarms.json`` and ``index.html`` (the trends) at the end; ``resume=True`` skips every
     recording analysed there before (by content, not name) and retries the failed ones;
     ``force=True`` starts it again. Trends: per axis, each parameter against the median of
-    its first ``baseline`` recordings, in a band of ``z`` times its spread and standard
-    error combined, never narrower than ``min_change`` of the baseline
-    (:mod:`pmsm_sysid.core.fleet.trends`). ``progress`` is called with a
+    its first ``baseline`` recordings, in a band from their spread and each recording's
+    standard error at ``z`` standard deviations, never narrower than ``min_change`` of the
+    baseline (:mod:`pmsm_sysid.core.fleet.trends` states the rule). ``progress`` is called with a
     :class:`FleetProgress` after each row.
 
     Returns a :class:`FleetResult`; ``table, alarms = ps.fleet(...)`` unpacks it.

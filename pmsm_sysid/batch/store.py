@@ -138,7 +138,7 @@ def check_out_dir(out: Path, *, resume: bool, force: bool) -> bool:
     """Refuse an output directory before any work; True when it holds a fleet result to
     resume. A new or empty directory is fine; one holding a fleet result needs ``resume``
     (add to it) or ``force`` (start again); one holding anything else is never used."""
-    from ..validate import check_output_dir
+    from ..validate import check_output_dir, check_output_file
 
     if not out.exists() and not out.is_symlink():
         check_output_dir(out, "--out")  # the parent exists and can be written
@@ -154,7 +154,7 @@ def check_out_dir(out: Path, *, resume: bool, force: bool) -> bool:
         shown = ", ".join((others or names)[:3]) + (" ..." if len(others or names) > 3 else "")
         raise OutputError(f"--out {out}: holds other things ({shown}); give a new or empty "
                           "directory, or one a fleet batch wrote")
-    check_output_dir(out / MANIFEST, "--out", force=True)  # can be written
+    check_output_file(out / MANIFEST, "--out", force=True)  # can be written
     if not names:
         return False
     if not (resume or force):

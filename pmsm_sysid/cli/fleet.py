@@ -56,10 +56,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(default 1e-3)")
     p.add_argument("--min-share", type=parse_fraction, default=0.01,
                    help="smallest share of the mismatch an effect must explain (default 0.01)")
-    p.add_argument("--baseline", type=count(3, 10_000), default=5, metavar="N",
-                   help="an axis's first N recordings are its baseline (default 5)")
+    p.add_argument("--baseline", type=count(3, 10_000), default=8, metavar="N",
+                   help="an axis's first N recordings are its baseline (default 8)")
     p.add_argument("--band", type=number(0, 100, low_open=True), default=4.0, metavar="Z",
-                   help="band half-width in standard deviations (default 4)")
+                   help="band half-width in standard deviations, i.e. the false-alarm level "
+                        "of one comparison (default 4: p = 6e-5)")
     p.add_argument("--min-change", type=number(0, 1), default=0.02, metavar="F",
                    help="smallest relative change alarmed (default 0.02 = 2%%)")
     p.add_argument("--json", metavar="FILE", help="write a summary as JSON ('-' = stdout)")

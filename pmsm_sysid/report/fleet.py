@@ -12,7 +12,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ..core.fleet import MAGNITUDE, AxisTrend, TrendOptions
+from ..core.fleet import MAGNITUDE, AxisTrend, TrendOptions, spread_factor
 from ..plots import save
 from ..plots.fleet import FILE_PREFIX, axis_trends
 from .html import Block, Note, Section, Table, image, render_page
@@ -90,13 +90,16 @@ def _failed(rows: Sequence[Mapping[str, Any]], axis: str | None) -> Table | None
 
 
 def _method(options: TrendOptions) -> Note:
+    factor = spread_factor(options.baseline, options.z)
     return Note(
         f"Baseline: the median of each parameter over an axis's first {options.baseline} "
-        "recordings; its spread is their standard deviation with an odd one left out. "
-        f"Band: the baseline ± {options.z:g} × √(spread² + the recording's own standard "
-        f"error²), never narrower than ± {options.min_change:.0%} of the baseline. An "
-        "effect not found counts as size zero, so an effect that appears (or vanishes) "
-        "leaves the band. Phases are not followed.")
+        "recordings; its spread σ is their standard deviation with an odd one left out. "
+        f"Band: the baseline ± √((t σ)² (1 + π/(2n)) + ({options.z:g} s)²), s the "
+        f"recording's own standard error, t Student's quantile for the n baseline values at "
+        f"the level of {options.z:g} standard deviations (t √(1 + π/(2n)) = {factor:.3g} for "
+        f"{options.baseline}), never narrower than ± {options.min_change:.0%} of the "
+        "baseline. An effect not found counts as size zero, so an effect that appears (or "
+        "vanishes) leaves the band. Phases are not followed.")
 
 
 def write_fleet_report(out: str | Path, trends: Sequence[AxisTrend],

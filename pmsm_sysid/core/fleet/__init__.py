@@ -22,10 +22,12 @@ from .trends import (
     fleet_alarms,
     fleet_trends,
     robust_baseline,
+    spread_factor,
 )
 
 __all__ = [
     "EFFECT_PARAMS", "MAGNITUDE", "Alarm", "AxisTrend", "Observation", "ParameterTrend",
     "Point", "TrendOptions", "columns", "diagnosis_columns", "empty_row", "fleet_alarms",
-    "fleet_trends", "param_columns", "plant_columns", "robust_baseline", "trended_parameters",
+    "fleet_trends", "param_columns", "plant_columns", "robust_baseline", "spread_factor",
+    "trended_parameters",
 ]

@@ -1,19 +1,24 @@
 """Per-axis trends of the fitted plant parameters and the drift alarms.
 
 For each axis, the recordings are taken in time order (their first stamp). The **baseline**
-of a parameter is its value over the axis's first ``baseline`` recordings (default 5): the
-median ``m`` and a spread ``σ_b`` that one odd recording cannot move -- the standard
-deviation of the baseline values within ``OUTLIER_MADS`` scaled median absolute deviations
-of the median (an odd one is left out). A later recording, whose fit states the standard
-error ``s``, is **in band** when
+of a parameter is its value over the axis's first ``baseline`` recordings (default 8): the
+median ``m``, and the spread ``σ_b``, the standard deviation of the n baseline values kept:
+all, or all but one odd one (a single value further than ``OUTLIER_MADS`` scaled median
+absolute deviations from the median; one odd recording moves neither). A later recording
+whose fit states the standard error ``s`` is **in band** when
 
-    |value - m| <= max(z * sqrt(σ_b² + s²), min_change * |m|)
+    |value - m| <= max(sqrt((t σ_b)² (1 + π/(2n)) + (z s)²), min_change |m|)
 
-(``z`` = 4 by default: the spread between recordings and the recording's own uncertainty
-together, a 4-sigma band; ``min_change`` = 2 %: a change smaller than that is not worth
-an alarm, however well measured). Leaving the band is an **alarm**, raised at the first
-recording of each excursion (the answer to "since when"); the parameter's state is
-``alarm`` while its latest recording is out of band.
+``z`` (default 4) sets the false-alarm level of one comparison, p = 6e-5 two-sided; ``t``
+is Student's quantile at the same level for n - 1 degrees of freedom: a spread measured on a
+few recordings is uncertain, and is widened accordingly (t = 8.5 for 8 recordings), and
+π/(2n) is the variance of the baseline median itself. The stated errors of the fits are
+trusted for the recording's own part only, not for the scatter between days, which real
+drives have beyond it (a model error makes stated errors too small, too).
+``min_change`` (default 2 %) is the smallest change worth a maintenance alarm, however well
+measured. Leaving the band is an **alarm**, raised at the first recording of each excursion
+(the answer to "since when"); the parameter's state is ``alarm`` while its latest recording
+is out of band.
 
 An effect that is absent counts as size zero (its magnitude parameter: ``cogging.amplitude_n``,
 ``coulomb_friction.amplitude_n``, ...): a cogging absent from the baseline and found now is
@@ -29,13 +34,14 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import stats
 
 from ..errors import OptionError
 from .columns import magnitude_of, trended_parameters
 
 #: The spread (σ_b) leaves out baseline values further than this many scaled MADs (1.4826 x
 #: the median absolute deviation) from the median.
-OUTLIER_MADS = 3.0
+OUTLIER_MADS = 4.0
 MAD_SCALE = 1.4826
 
 
@@ -45,7 +51,7 @@ class TrendOptions:
     ``z``: band half-width in standard deviations; ``min_change``: the smallest relative
     change alarmed."""
 
-    baseline: int = 5
+    baseline: int = 8
     z: float = 4.0
     min_change: float = 0.02
 
@@ -135,15 +141,26 @@ class AxisTrend:
         return tuple(p for p in self.parameters if p.state == "alarm")
 
 
-def robust_baseline(values: Sequence[float]) -> tuple[float, float]:
-    """(median, spread) of baseline values; the spread is the standard deviation of the
-    values within :data:`OUTLIER_MADS` scaled MADs of the median (0 for fewer than two)."""
+def robust_baseline(values: Sequence[float]) -> tuple[float, float, int]:
+    """(median, spread, n) of baseline values. The spread is the standard deviation of the n
+    values kept: all, or all but one odd one -- a single value further than
+    :data:`OUTLIER_MADS` scaled MADs from the median (when several are that far, none is odd:
+    the values scatter that much). 0 for fewer than two values."""
     x = np.asarray(values, dtype=np.float64)
     m = float(np.median(x))
-    mad = MAD_SCALE * float(np.median(np.abs(x - m)))
-    keep = x[np.abs(x - m) <= OUTLIER_MADS * mad] if mad > 0 else x[x == m]
+    far = np.abs(x - m) > OUTLIER_MADS * MAD_SCALE * float(np.median(np.abs(x - m)))
+    keep = x[~far] if int(far.sum()) == 1 else x
     spread = float(np.std(keep, ddof=1)) if len(keep) >= 2 else 0.0
-    return m, spread
+    return m, spread, len(keep)
+
+
+def spread_factor(n: int, z: float) -> float:
+    """``t * sqrt(1 + π/(2n))``: Student's quantile for n baseline values (n - 1 degrees of
+    freedom) at the two-sided level of ``z`` standard deviations, for a new value compared
+    with the baseline's median (whose variance is about π/(2n) times one value's)."""
+    p = 2.0 * float(stats.norm.sf(z))
+    return float(stats.t.ppf(1.0 - p / 2.0, max(n - 1, 1))) * math.sqrt(
+        1.0 + math.pi / (2.0 * max(n, 1)))
 
 
 def _series(obs: Sequence[Observation], parameter: str) -> list[tuple[Observation, float | None,
@@ -163,8 +180,9 @@ def _series(obs: Sequence[Observation], parameter: str) -> list[tuple[Observatio
 
 def _half_width(m: float, spread: float, s: float | None, s_ref: float,
                 options: TrendOptions) -> float:
+    """``spread`` here is already widened by :func:`spread_factor`."""
     sd = s if s is not None else s_ref
-    return max(options.z * math.hypot(spread, sd), options.min_change * abs(m))
+    return max(math.hypot(spread, options.z * sd), options.min_change * abs(m))
 
 
 def parameter_trend(obs: Sequence[Observation], parameter: str,
@@ -183,7 +201,8 @@ def parameter_trend(obs: Sequence[Observation], parameter: str,
                      for i, (o, v, s) in enumerate(series) if v is not None)
         return ParameterTrend(axis, parameter, None, None, bare, (),
                               "baseline" if len(obs) < k else "untracked")
-    m, spread = robust_baseline([v for v, _ in base])
+    m, spread, n = robust_baseline([v for v, _ in base])
+    wide = spread * spread_factor(n, options.z)
     stds = [s for _, s in base if s is not None]
     s_ref = float(np.median(stds)) if stds else 0.0
     points: list[Point] = []
@@ -191,7 +210,7 @@ def parameter_trend(obs: Sequence[Observation], parameter: str,
     for i, (o, v, s) in enumerate(series):
         if v is None:
             continue
-        h = _half_width(m, spread, s, s_ref, options)
+        h = _half_width(m, wide, s, s_ref, options)
         out = i >= k and abs(v - m) > h
         if out and not (points and points[-1].out):
             alarms.append(Alarm(axis, parameter, o.recording, o.start_time, v, m,
