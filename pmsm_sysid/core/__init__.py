@@ -16,7 +16,9 @@ Grouped by stage, in the order the data flows (a stage imports only stages befor
 - :mod:`~pmsm_sysid.core.online`: windows, fit worker processes, the per-window tracker and
   change detection (what ``run`` does, without ROS);
 - :mod:`~pmsm_sysid.core.discrepancy`: a recording against a plant -- ``diagnose``,
-  sim-to-real: where the mismatch lives, what is left unexplained, the fit before/after.
+  sim-to-real: where the mismatch lives, what is left unexplained, the fit before/after;
+- :mod:`~pmsm_sysid.core.fleet`: a fleet of axes -- the table of fitted plants (one row per
+  recording axis) and each axis's parameters over time against its baseline, drift alarms.
 
 Errors of every stage are the types in :mod:`~pmsm_sysid.core.errors`.
 """
