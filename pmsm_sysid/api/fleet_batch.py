@@ -322,12 +322,16 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
         >>> alarms  # two recordings are no baseline yet
         []
     """
-    from ..batch.cluster import check_workers, connect, require_extra
+    from ..batch.cluster import require_extra
+
+    require_extra()  # before anything imports Dask or pyarrow
+    from ..batch.cluster import check_address, check_workers, connect
     from ..batch.inputs import expand
     from ..batch.store import Store, check_out_dir
 
-    require_extra()
     _check_client(client, scheduler)
+    if scheduler is not None:
+        check_address(scheduler)
     n = _default_workers() if workers is None else _checks.count("workers", workers, 1)
     batch = _batch(plant, namespace, axis_from, min_duration, alpha, min_share,
                    TrendOptions(_checks.count("baseline", baseline, 3),

@@ -9,6 +9,7 @@ address (``tcp://HOST:PORT``, started with ``dask scheduler`` and ``dask worker`
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
@@ -70,11 +71,25 @@ def check_workers(client: Client, where: str, timeout_s: float = WORKERS_TIMEOUT
     return len(versions)
 
 
+_ADDRESS = re.compile(r"^(?:(?:tcp|tls|ws|wss|ucx)://)?(\[[0-9A-Fa-f:.]+\]|[^:/\s\[\]]+):(\d{1,5})$")
+
+
+def check_address(address: str) -> str:
+    """A scheduler address ``tcp://HOST:PORT`` (or tls://, ws://, wss://, ucx://, or no
+    scheme); OptionError otherwise."""
+    m = _ADDRESS.match(address) if isinstance(address, str) else None
+    if m is None or not 0 < int(m.group(2)) < 65536:
+        raise OptionError(f"--scheduler {address}: not a scheduler address (expected "
+                          "tcp://HOST:PORT, as 'dask scheduler' prints)")
+    return address
+
+
 def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> Client:
     """A client of the cluster whose scheduler listens at ``address``; OptionError (one
     line) when it does not answer within ``timeout_s``."""
     from dask.distributed import Client
 
+    check_address(address)
     try:
         client = Client(address, timeout=timeout_s, set_as_default=False)
     except Exception as exc:  # OSError (timeout, refused), ValueError (malformed address)

@@ -74,11 +74,11 @@ def _walk(root: Path) -> Iterator[Path]:
 
 def expand(arguments: Sequence[str]) -> list[Path]:
     """Every recording named by ``arguments`` (paths, directories, glob patterns), each
-    once, in the order given. An argument that names no recording is an error."""
+    once, in the order given (a storage file inside a recording directory also named is
+    that recording). An argument that names no recording is an error."""
     if not arguments:
         raise OptionError("no recordings given (paths, directories or glob patterns)")
-    seen: set[Path] = set()
-    out: list[Path] = []
+    found: list[Path] = []
     for arg in arguments:
         if glob.has_magic(arg):
             matches = [Path(m) for m in sorted(glob.glob(arg, recursive=True))]
@@ -86,15 +86,20 @@ def expand(arguments: Sequence[str]) -> list[Path]:
             matches = [Path(arg)]
         else:
             raise OptionError(f"{arg}: no such file or directory")
-        found = [r for m in matches for r in _walk(m)]
-        if not found:
+        mine = [r for m in matches for r in _walk(m)]
+        if not mine:
             raise OptionError(f"{arg}: no recording found (a recording is a rosbag2 directory "
                               "or a .mcap/.db3 file)")
-        for r in found:
-            key = r.resolve()
-            if key not in seen:
-                seen.add(key)
-                out.append(r)
+        found += mine
+    dirs = {r.resolve() for r in found if r.is_dir()}
+    seen: set[Path] = set()
+    out: list[Path] = []
+    for r in found:
+        key = r.resolve()
+        if key in seen or any(parent in dirs for parent in key.parents):
+            continue
+        seen.add(key)
+        out.append(r)
     return out
 
 

@@ -183,6 +183,9 @@ class Store:
         if self.out is None or self.parts is None:
             return
         self.out.mkdir(exist_ok=True)
+        for d in (self.out, self.parts):  # what a killed batch left half-written
+            for tmp in d.glob(".*.tmp") if d.is_dir() else ():
+                tmp.unlink(missing_ok=True)
         if resume:
             self._check_manifest(manifest)
             if (self.out / RESULTS).is_file():

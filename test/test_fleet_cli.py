@@ -1,0 +1,277 @@
+"""``pmsm-sysid fleet`` on Dask: bad arguments stop before any work (one line, exit 2); bad
+recordings are rows with their reason while the batch goes on (exit 1, the last line says
+how many); a batch killed half way and resumed ends with every row once, the finished ones
+not analysed again; the same command on a real Dask cluster (a scheduler and a worker
+started as their own processes)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+from fleet_helpers import EXE, NOMINAL, drive, needs_fit_plant, recording
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+import pmsm_sysid as ps
+
+JAZZY = get_typestore(Stores.ROS2_JAZZY)
+DEADLINE_S = 900.0  # generous: only to end a hung test, never a performance check
+
+
+def _fleet(*args: str, timeout: float = DEADLINE_S) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([str(EXE), "fleet", *args], capture_output=True, text=True,
+                          timeout=timeout, check=False)
+
+
+def _one_line(proc: subprocess.CompletedProcess[str], *fragments: str) -> str:
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert proc.returncode == 2, (proc.returncode, proc.stderr[-2000:])
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    for f in fragments:
+        assert f in lines[0], (f, lines[0])
+    return lines[0]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+# ----------------------------------------------------------------------- bad arguments
+
+
+def test_no_recordings_is_one_line_before_any_work(tmp_path: Path) -> None:
+    proc = _fleet("--plant", str(NOMINAL), "--out", str(tmp_path / "out"))
+    _one_line(proc, "pmsm-sysid fleet: error:", "no recordings given")
+    proc = _fleet(str(tmp_path / "nowhere"), "--plant", str(NOMINAL), "--out",
+                  str(tmp_path / "out"))
+    _one_line(proc, "nowhere: no such file or directory")
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_output_directory_holding_other_things_is_refused(tmp_path: Path) -> None:
+    bag = ps.write_bag(ps.simulate(duration=0.2), tmp_path / "bag")
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "thesis.tex").write_text("years of work")
+    for extra in ([], ["--force"], ["--resume"]):
+        proc = _fleet(str(bag), "--plant", str(NOMINAL), "--out", str(out), *extra)
+        _one_line(proc, f"--out {out}: holds other things (thesis.tex)")
+    assert sorted(p.name for p in out.iterdir()) == ["thesis.tex"]
+
+
+def test_a_scheduler_that_does_not_answer_is_one_line_before_any_work(tmp_path: Path) -> None:
+    bag = ps.write_bag(ps.simulate(duration=0.2), tmp_path / "bag")
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    started = time.monotonic()
+    proc = _fleet(str(bag), "--plant", str(NOMINAL), "--out", str(tmp_path / "out"),
+                  "--scheduler", address)
+    _one_line(proc, f"--scheduler {address}: no Dask scheduler answers there within 5 s")
+    assert time.monotonic() - started < 120  # the connect timeout, not a hang
+    assert not (tmp_path / "out").exists()
+    proc = _fleet(str(bag), "--plant", str(NOMINAL), "--out", str(tmp_path / "out"),
+                  "--scheduler", "tcp://127.0.0.1:notaport")
+    _one_line(proc, "--scheduler tcp://127.0.0.1:notaport: not a scheduler address")
+
+
+def test_without_the_fleet_extra_the_verb_names_it(tmp_path: Path) -> None:
+    bag = ps.write_bag(ps.simulate(duration=0.2), tmp_path / "bag")
+    code = ("import sys\n"
+            "for name in ('dask', 'distributed', 'pyarrow'):\n"
+            "    sys.modules[name] = None  # as after a plain 'pip install'\n"
+            "from pmsm_sysid.cli import main\n"
+            "sys.exit(main(sys.argv[1:]))\n")
+    proc = subprocess.run([sys.executable, "-c", code, "fleet", str(bag), "--plant",
+                           str(NOMINAL), "--out", str(tmp_path / "out")],
+                          capture_output=True, text=True, timeout=300, check=False)
+    _one_line(proc, "fleet needs dask[distributed] and pyarrow",
+              "pip install 'pmsm_sysid[fleet]'")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(("kwargs", "fragment"), [
+    ({"client": "tcp://127.0.0.1:8786"}, "client must be a dask.distributed.Client"),
+    ({"resume": True}, "resume needs out"), ({"workers": 0}, "workers must be at least 1"),
+    ({"baseline": 2}, "baseline must be at least 3"), ({"min_change": 1.5}, "min_change"),
+    ({"axis_from": "name"}, "axis_from must be one of"), ({"alpha": 2.0}, "alpha"),
+    ({"plant": "no/such.yaml"}, "no such plant file")])
+def test_bad_api_options_raise_before_any_work(tmp_path: Path, kwargs: dict[str, object],
+                                               fragment: str) -> None:
+    with pytest.raises(ps.PmsmSysidError) as info:
+        ps.fleet(str(tmp_path / "nothing"), **{"plant": NOMINAL, **kwargs})  # type: ignore
+    assert fragment in str(info.value) and "\n" not in str(info.value)
+
+
+# ----------------------------------------------------------------------- bad recordings
+
+
+def _empty_bag(path: Path) -> Path:
+    """The three topics, no message."""
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        for name, msgtype in (("thrust", "geometry_msgs/msg/WrenchStamped"),
+                              ("speed", "geometry_msgs/msg/TwistStamped"),
+                              ("position", "geometry_msgs/msg/PointStamped")):
+            w.add_connection(f"/pmsm/{name}", msgtype, typestore=JAZZY)
+    return path
+
+
+def _unreadable_bag(path: Path) -> Path:
+    path.mkdir()
+    (path / "metadata.yaml").write_text("rosbag2_bagfile_information: {version: [\n")
+    (path / f"{path.name}_0.mcap").write_bytes(b"\x89MCAP0\r\nnot really")
+    return path
+
+
+@needs_fit_plant
+def test_bad_recordings_are_rows_with_their_reason_and_the_batch_goes_on(
+        tmp_path: Path) -> None:
+    good = recording(tmp_path / "good", drive(), seed=1, day=0)
+    short = recording(tmp_path / "short", drive(), seed=2, day=1, duration=2.0)
+    empty = _empty_bag(tmp_path / "empty")
+    broken = _unreadable_bag(tmp_path / "broken")
+    out = tmp_path / "out"
+    proc = _fleet(str(good), str(short), str(empty), str(broken), "--plant", str(NOMINAL),
+                  "--out", str(out), "--workers", "2", "--json", str(tmp_path / "s.json"))
+    assert proc.returncode == 1, proc.stderr[-3000:]
+    assert "Traceback" not in proc.stderr
+    last = proc.stdout.strip().splitlines()[-1]
+    assert last.startswith("fleet: 4 recording axes analysed, 3 failed"), last
+    rows = {r["recording"]: r for r in pq.read_table(out / "results.parquet").to_pylist()}
+    assert rows[str(good)]["status"] == "ok" and rows[str(good)]["error"] is None
+    assert rows[str(good)]["mass_kg"] is not None
+    reasons = {k: r["error"] for k, r in rows.items() if r["status"] == "error"}
+    assert "too short: 2 s of data" in reasons[str(short)]
+    assert "empty recording" in reasons[str(empty)]
+    assert reasons[str(broken)].startswith(str(broken) + ":")
+    assert all("\n" not in r and "Traceback" not in r for r in reasons.values())
+    assert rows[str(short)]["duration_s"] == pytest.approx(2.0)
+    assert rows[str(short)]["start_time"] is not None
+    assert json.loads((tmp_path / "s.json").read_text())["failed"] == 3
+
+
+# ----------------------------------------------------------------------- kill and resume
+
+
+@pytest.fixture(scope="module")
+def five_recordings(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    root = tmp_path_factory.mktemp("five")
+    return [recording(root / f"day{i}", drive(), seed=10 + i, day=i, duration=6.0)
+            for i in range(5)]
+
+
+def _parts(out: Path) -> list[Path]:
+    return sorted((out / "parts").glob("*.parquet")) if (out / "parts").is_dir() else []
+
+
+@needs_fit_plant
+@pytest.mark.timeout(1800)
+def test_a_batch_killed_half_way_resumes_without_losing_or_repeating_a_row(
+        tmp_path: Path, five_recordings: list[Path]) -> None:
+    out = tmp_path / "out"
+    args = [*map(str, five_recordings), "--plant", str(NOMINAL), "--out", str(out),
+            "--workers", "1"]
+    proc = subprocess.Popen([str(EXE), "fleet", *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + DEADLINE_S
+        while len(_parts(out)) < 2 and proc.poll() is None:  # two rows finished
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGKILL)  # the CLI and the workers it started
+    finally:
+        proc.wait(timeout=60)
+    done = {r["content_sha256"]: r for p in _parts(out)
+            for r in pq.read_table(p).to_pylist()}
+    assert 2 <= len(done) < 5
+    if (out / "results.parquet").exists():  # whatever was last written is a whole table
+        assert pq.read_table(out / "results.parquet").num_rows <= len(done)
+    again = _fleet(*args, "--resume")
+    assert again.returncode == 0, again.stderr[-3000:]
+    last = again.stdout.strip().splitlines()[-1]
+    assert f"{5 - len(done)} recording axes analysed, 0 failed, {len(done)} done before" \
+        in last, last
+    table = pq.read_table(out / "results.parquet").to_pylist()
+    assert len(table) == 5 and len({r["content_sha256"] for r in table}) == 5
+    assert sorted(r["recording"] for r in table) == sorted(map(str, five_recordings))
+    for r in table:  # the rows finished before the kill were not analysed again
+        if r["content_sha256"] in done:
+            assert r["analysed_at"] == done[r["content_sha256"]]["analysed_at"]
+    assert not (out / "parts").exists() and (out / "index.html").is_file()
+    # renamed and run again: nothing to do, by content
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    for p in five_recordings[:2]:
+        (moved / p.name).symlink_to(p, target_is_directory=True)
+    third = _fleet(str(moved), *args[5:], "--resume")
+    assert third.returncode == 0 and "0 recording axes analysed" in third.stdout, third.stdout
+
+
+# ----------------------------------------------------------------------- a real cluster
+
+
+@pytest.fixture
+def dask_cluster(tmp_path: Path) -> Iterator[str]:
+    """A Dask scheduler and one worker, each its own process on this host."""
+    info = tmp_path / "scheduler.json"
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host",
+                               "127.0.0.1", "--port", "0", "--no-dashboard",
+                               "--scheduler-file", str(info)], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        deadline = time.monotonic() + 120
+        while not (info.is_file() and info.stat().st_size):
+            assert time.monotonic() < deadline and procs[0].poll() is None
+            time.sleep(0.05)
+        address = json.loads(info.read_text())["address"]
+        procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", address,
+                                       "--nthreads", "1", "--nworkers", "1",
+                                       "--no-dashboard", "--host", "127.0.0.1",
+                                       "--name", "fleet-test-worker"], env=env,
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        yield address
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+
+
+@needs_fit_plant
+@pytest.mark.timeout(1800)
+def test_the_same_command_runs_on_a_dask_cluster(tmp_path: Path, dask_cluster: str,
+                                                 five_recordings: list[Path]) -> None:
+    from dask.distributed import Client
+
+    out = tmp_path / "out"
+    proc = _fleet(*map(str, five_recordings[:2]), "--plant", str(NOMINAL), "--out", str(out),
+                  "--scheduler", dask_cluster)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    table = pq.read_table(out / "results.parquet").to_pylist()
+    assert [r["status"] for r in table] == ["ok", "ok"]
+    with Client(dask_cluster, timeout=30) as client:
+        ran = client.run_on_scheduler(
+            lambda dask_scheduler: {ts.prefix.name: ts.prefix.state_counts["memory"]
+                                    + ts.prefix.state_counts["released"]
+                                    + ts.prefix.state_counts["forgotten"]
+                                    for ts in dask_scheduler.tasks.values()} or
+            {name: sum(p.state_counts.values())
+             for name, p in dask_scheduler.task_prefixes.items()})
+        workers = client.scheduler_info()["workers"]
+    assert ran.get("recording_row", 0) >= 2, ran  # the rows were the cluster's tasks
+    assert [w["name"] for w in workers.values()] == ["fleet-test-worker"]
