@@ -1,5 +1,5 @@
 """Shared pieces of the fleet tests: simulated recordings of a drive axis (10 s, a drive's
-noise, stamped at a given date), and a mark for the tests that need ``ps.fit_plant``."""
+noise, stamped at a given date)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,6 @@ import dataclasses
 import sys
 from pathlib import Path
 from typing import Any
-
-import pytest
 
 import pmsm_sysid as ps
 from pmsm_sysid.core.physics.plant import CoulombFriction
@@ -19,11 +17,6 @@ NOMINAL = REPO / "plants" / "nominal.yaml"
 DAY = 86400.0
 #: 2026-01-05 00:00 UTC: the first recording of every simulated fleet
 EPOCH = 1_767_571_200.0
-
-#: Every row of the fleet table holds a fitted plant (ps.fit_plant); the tests of rows that
-#: should come out ``ok`` need it on this branch.
-needs_fit_plant = pytest.mark.skipif(
-    "fit_plant" not in ps.__all__, reason="ps.fit_plant is not on this branch yet")
 
 
 def drive(**changes: Any) -> ps.Plant:

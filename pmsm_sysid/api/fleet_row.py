@@ -29,13 +29,13 @@ def _fit_and_diagnose(rec: Any, plant: Plant, alpha: float,
                       min_share: float) -> dict[str, Any]:
     """The plant part of the row: the fitted physical plant, and the diagnosis of the
     reference plant on the same recording."""
-    import pmsm_sysid as ps
-
     from ..core.fleet import diagnosis_columns, plant_columns
+    from .diagnosis import diagnose
+    from .plantfit import fit_plant
 
-    fit = ps.fit_plant(rec, alpha=alpha, min_share=min_share).to_dict()
-    found = ps.diagnose(plant, rec, alpha=alpha, min_share=min_share, replay=False,
-                        gfrf=False).to_dict()
+    fit = fit_plant(rec, alpha=alpha, min_share=min_share).to_dict()
+    found = diagnose(plant, rec, alpha=alpha, min_share=min_share, replay=False,
+                     gfrf=False).to_dict()
     row = plant_columns(fit.get("plant") or {}, fit.get("std") or {}, fit.get("effects") or [])
     row.update(diagnosis_columns(found))
     row["effects"] = [str(e.get("name")) for e in fit.get("effects") or []]

@@ -67,8 +67,10 @@ def _walk(root: Path) -> Iterator[Path]:
         children = sorted(root.iterdir())
     except OSError as exc:
         raise OptionError(f"{root}: cannot list ({exc.strerror or exc})") from exc
-    for child in children:
-        if child.is_dir() and not child.is_symlink():
+    for child in children:  # a link to a recording is followed, a linked directory is not
+        if _is_recording(child) and child.is_dir():
+            yield child
+        elif child.is_dir() and not child.is_symlink():
             yield from _walk(child)
 
 
