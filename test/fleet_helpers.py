@@ -23,7 +23,7 @@ def drive(**changes: Any) -> ps.Plant:
     """The packaged drive plant (Table 1 motor, a 1 um scale's noise, 1 N process force)
     with 5 N of Coulomb friction, as a linear axis on a rail has, and ``changes``."""
     base = ps.Plant.from_yaml(REPO / "pmsm_sysid" / "data" / "drive.yaml")
-    return dataclasses.replace(base, coulomb_friction=CoulombFriction(5.0), **changes)
+    return dataclasses.replace(base, **{"coulomb_friction": CoulombFriction(5.0), **changes})
 
 
 def recording(path: Path, plant: ps.Plant, seed: int, day: float, *,

@@ -109,8 +109,15 @@ def local_cluster(workers: int) -> Iterator[Client]:
     closed on exit."""
     from dask.distributed import Client, LocalCluster
 
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=logging.ERROR)
+    try:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None, silence_logs=logging.ERROR)
+    except Exception as exc:
+        raise OptionError(
+            f"the local Dask cluster of {workers} worker(s) did not start "
+            f"({type(exc).__name__}: {' '.join(str(exc).split())}); a Python script that "
+            "runs a fleet must do so under 'if __name__ == \"__main__\":' (its worker "
+            "processes import the script)") from exc
     try:
         client = Client(cluster, set_as_default=False)
         try:

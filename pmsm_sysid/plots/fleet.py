@@ -3,8 +3,8 @@
 ``axis_trends`` draws one panel per followed parameter of an axis: each recording's value
 with its standard error, the baseline (median of the first recordings, dashed) and the band
 around it (shaded), recordings out of band in red, and each alarm (the first recording of
-an excursion) marked with a triangle. ``data`` holds, per parameter, the times (s since
-1970, UTC), values, band edges, out-of-band flags and alarm times that were drawn.
+an excursion) marked by a dotted red line at its time. ``data`` holds, per parameter, the
+times (s since 1970, UTC), values, band edges, out-of-band flags and alarm times drawn.
 """
 
 from __future__ import annotations
@@ -24,6 +24,9 @@ UNITS = (("_n_per_mps", "N·s/m"), ("_n_per_m", "N/m"), ("_mps", "m/s"), ("_kg",
 BASELINE_COLOUR = "0.35"
 BAND_COLOUR = "tab:green"
 OUT_COLOUR = "tab:red"
+#: How a parameter's state reads in a panel's title.
+STATE_WORDS = {"baseline": "baseline forming", "untracked": "not in most of the baseline: "
+               "not compared", "ok": "ok", "alarm": "ALARM"}
 #: Every figure of a fleet page is named ``trend_<axis>.png``.
 FILE_PREFIX = "trend_"
 
@@ -67,11 +70,12 @@ def _panel(ax: Any, p: ParameterTrend) -> dict[str, Any]:
             ax.errorbar(_dates(t[mask]), v[mask], yerr=err[mask], fmt="o", markersize=3.5,
                         capsize=2, linewidth=0.8, **({"color": "tab:blue"} | style))
     ta = np.asarray([a.start_time for a in p.alarms])
-    va = np.asarray([a.value for a in p.alarms])
-    if len(ta):
-        ax.plot(_dates(ta), va, "v", color=OUT_COLOUR, markersize=9, label="alarm")
+    for i, when in enumerate(_dates(ta)):
+        ax.axvline(when, color=OUT_COLOUR, linestyle=":", linewidth=1.2,
+                   label="alarm" if i == 0 else None)
     ax.set_ylabel(label(p.parameter), fontsize=7)
-    ax.set_title(f"{p.parameter}: {p.state}", fontsize=8, loc="left")
+    ax.set_title(f"{p.parameter}: {STATE_WORDS.get(p.state, p.state)}", fontsize=8,
+                 loc="left")
     return {"t": t, "value": v, "std": err, "band_t": tb, "lo": lo, "hi": hi, "out": out,
             "alarms": ta, "baseline": p.baseline}
 
@@ -96,5 +100,6 @@ def axis_trends(trend: AxisTrend) -> Plot:
     return Plot(fig, file_stem(trend.axis),
                 f"Axis {trend.axis}: each followed parameter of its fitted plant over time, "
                 f"with its standard error; dashed: the baseline (median of the first "
-                f"recordings, open circles); shaded: the band; red: out of band; triangles: "
-                f"the {n_alarms} alarm(s), each at the first recording out of band.", data)
+                f"recordings, open circles); shaded: the band; red: out of band; dotted red "
+                f"lines: the {n_alarms} alarm(s), each at the first recording out of band.",
+                data)
