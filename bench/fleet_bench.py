@@ -81,7 +81,7 @@ def on_dask(root: Path, workers: int) -> dict[str, Any]:
 
     start = time.perf_counter()
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None, silence_logs=logging.ERROR) as cluster, \
+                      dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
             Client(cluster) as client:
         result = ps.fleet(str(root), plant=REPO / "plants" / "nominal.yaml", client=client)
         seconds = time.perf_counter() - start

@@ -29,9 +29,12 @@ JAZZY = get_typestore(Stores.ROS2_JAZZY)
 DEADLINE_S = 900.0  # generous: only to end a hung test, never a performance check
 
 
-def _fleet(*args: str, timeout: float = DEADLINE_S) -> subprocess.CompletedProcess[str]:
+def _fleet(*args: str, timeout: float = DEADLINE_S,
+           bar: bool = False) -> subprocess.CompletedProcess[str]:
+    """``pmsm-sysid fleet ARGS``; ``bar``: draw the progress bar though not on a terminal."""
+    env = dict(os.environ, PMSM_SYSID_PROGRESS="1" if bar else "0")
     return subprocess.run([str(EXE), "fleet", *args], capture_output=True, text=True,
-                          timeout=timeout, check=False)
+                          timeout=timeout, check=False, env=env)
 
 
 def _one_line(proc: subprocess.CompletedProcess[str], *fragments: str) -> str:
@@ -114,6 +117,23 @@ def test_bad_api_options_raise_before_any_work(tmp_path: Path, kwargs: dict[str,
     assert fragment in str(info.value) and "\n" not in str(info.value)
 
 
+def test_the_progress_bar_counts_done_and_failed_with_the_rate(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    from pmsm_sysid.api.fleet_batch import FleetProgress
+    from pmsm_sysid.cli.fleet import _Bars
+
+    monkeypatch.setenv("PMSM_SYSID_PROGRESS", "1")
+    bars = _Bars()
+    bars(FleetProgress(2, stage="reading recordings"))
+    bars(FleetProgress(2, done=2, stage="reading recordings"))
+    for done, failed in ((0, 0), (1, 0), (2, 1), (3, 1)):
+        bars(FleetProgress(3, done=done, failed=failed, skipped=4))
+    bars.close()
+    err = capsys.readouterr().err
+    assert "reading recordings" in err and "2/2" in err
+    assert "fleet" in err and "3/3" in err and "failed 1" in err and "/min" in err
+
+
 # ----------------------------------------------------------------------- bad recordings
 
 
@@ -142,9 +162,11 @@ def test_bad_recordings_are_rows_with_their_reason_and_the_batch_goes_on(
     broken = _unreadable_bag(tmp_path / "broken")
     out = tmp_path / "out"
     proc = _fleet(str(good), str(short), str(empty), str(broken), "--plant", str(NOMINAL),
-                  "--out", str(out), "--workers", "2", "--json", str(tmp_path / "s.json"))
+                  "--out", str(out), "--workers", "2", "--json", str(tmp_path / "s.json"),
+                  bar=True)
     assert proc.returncode == 1, proc.stderr[-3000:]
     assert "Traceback" not in proc.stderr
+    assert "4/4" in proc.stderr and "failed 3" in proc.stderr and "/min" in proc.stderr
     last = proc.stdout.strip().splitlines()[-1]
     assert last.startswith("fleet: 4 recording axes analysed, 3 failed"), last
     rows = {r["recording"]: r for r in pq.read_table(out / "results.parquet").to_pylist()}
@@ -195,8 +217,9 @@ def test_a_batch_killed_half_way_resumes_without_losing_or_repeating_a_row(
     assert 2 <= len(done) < 5
     if (out / "results.parquet").exists():  # whatever was last written is a whole table
         assert pq.read_table(out / "results.parquet").num_rows <= len(done)
-    again = _fleet(*args, "--resume")
+    again = _fleet(*args, "--resume", "--quiet", bar=True)
     assert again.returncode == 0, again.stderr[-3000:]
+    assert again.stderr == ""  # --quiet: no bar even where one is asked for
     last = again.stdout.strip().splitlines()[-1]
     assert f"{5 - len(done)} recording axes analysed, 0 failed, {len(done)} done before" \
         in last, last

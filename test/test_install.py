@@ -77,6 +77,38 @@ def test_base_install_has_no_ros_and_the_ros_extra_has_the_locked_wheels(
     lock = {line.split("==")[0] for line in (REPO / "requirements.lock").read_text().split()}
     ros = [r.split("~=")[0] for r in sections["ros"]]
     assert ros and all(name.startswith("ros-jazzy-") and name in lock for name in ros), ros
+    # fleet: Dask distributed and pyarrow, in the extra, not in the base install
+    assert set(sections["fleet"]) == {"dask[distributed]", "pyarrow"}
+    assert {"dask[distributed]", "pyarrow"} <= set(sections["test"])
+    assert not [r for r in base if r.split("[")[0] in ("dask", "distributed", "pyarrow")]
+
+
+def test_the_fleet_extra_and_everything_it_needs_is_pinned_in_the_lock() -> None:
+    """Every distribution dask[distributed] and pyarrow pull in on this Python (as installed
+    here, from the lock) is pinned in requirements.lock with the version installed: a fresh
+    ``make venv`` brings the same ones."""
+    from importlib import metadata
+
+    from packaging.requirements import Requirement
+    from packaging.utils import canonicalize_name
+
+    lock = {canonicalize_name(k): v for k, v in (
+        line.split("==") for line in (REPO / "requirements.lock").read_text().split())}
+    todo, seen = [("dask", "distributed"), ("distributed", ""), ("pyarrow", "")], set()
+    while todo:
+        name, extra = todo.pop()
+        if (name, extra) in seen:
+            continue
+        seen.add((name, extra))
+        dist = metadata.distribution(name)
+        assert lock.get(canonicalize_name(name)) == dist.version, (name, dist.version)
+        for text in dist.requires or []:
+            req = Requirement(text)
+            if req.marker is None or req.marker.evaluate({"extra": extra}):
+                todo += [(canonicalize_name(req.name), e) for e in (req.extras or {""})]
+    names = {n for n, _ in seen}
+    assert {"dask", "distributed", "pyarrow", "tornado", "cloudpickle", "msgpack",
+            "importlib-metadata"} <= names, names
 
 
 EXECUTABLES = ("diagnose", "gfrf", "identifier", "pmsm-sysid", "sim")

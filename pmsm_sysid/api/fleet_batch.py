@@ -315,10 +315,12 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
         >>> import pmsm_sysid as ps
         >>> table, alarms = ps.fleet(["bags/paper_speed_nominal", "bags/paper_speed_coulomb"],
         ...                          plant="plants/nominal.yaml", workers=1)
+        >>> table.column("recording").to_pylist()  # by axis, start time, name
+        ['bags/paper_speed_coulomb', 'bags/paper_speed_nominal']
         >>> table.column("status").to_pylist(), table.column("axis").to_pylist()
         (['ok', 'ok'], ['/pmsm', '/pmsm'])
         >>> table.column("coulomb_friction.amplitude_n").to_pylist()  # doctest: +ELLIPSIS
-        [None, 3.9...]
+        [4.0..., None]
         >>> alarms  # two recordings are no baseline yet
         []
     """

@@ -105,13 +105,13 @@ def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> Client:
 
 @contextmanager
 def local_cluster(workers: int) -> Iterator[Client]:
-    """A cluster of ``workers`` local worker processes, one thread each, no dashboard;
-    closed on exit."""
+    """A cluster of ``workers`` local worker processes, one thread each (its diagnostics
+    page on a free port, never a fixed one another cluster may hold); closed on exit."""
     from dask.distributed import Client, LocalCluster
 
     try:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=logging.ERROR)
+                               dashboard_address=":0", silence_logs=logging.ERROR)
     except Exception as exc:
         raise OptionError(
             f"the local Dask cluster of {workers} worker(s) did not start "

@@ -105,8 +105,11 @@ def row_key(row: Mapping[str, Any]) -> str:
 
 def write_table(table: pa.Table, path: Path) -> None:
     """Write a Parquet file under a temporary name beside ``path``, then rename it in."""
+    from ..validate import _umask
+
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        os.fchmod(fd, 0o666 & ~_umask())  # as a plain open() would create it
         with os.fdopen(fd, "wb") as fh:
             pq.write_table(table, fh)
             fh.flush()
