@@ -239,6 +239,55 @@ def test_a_batch_killed_half_way_resumes_without_losing_or_repeating_a_row(
     assert third.returncode == 0 and "0 recording axes analysed" in third.stdout, third.stdout
 
 
+# ----------------------------------------------------------------------- --sim
+
+
+@pytest.mark.timeout(1800)
+def test_a_recording_of_the_simulator_is_the_reference_with_sim(
+        tmp_path: Path, five_recordings: list[Path]) -> None:
+    """The simulator leaves the rail's friction out: each row holds the real axis's fitted
+    plant (5 N of Coulomb friction) and names the friction as what the simulation lacks."""
+    sim = recording(tmp_path / "sim", drive(coulomb_friction=None), seed=99, day=0)
+    out = tmp_path / "out"
+    args = [*map(str, five_recordings[:2]), "--out", str(out), "--workers", "1"]
+    proc = _fleet(*args, "--sim", str(sim))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    rows = pq.read_table(out / "results.parquet").to_pylist()
+    assert [r["status"] for r in rows] == ["ok", "ok"], [r["error"] for r in rows]
+    for r in rows:
+        assert r["coulomb_friction.amplitude_n"] == pytest.approx(5.0, rel=0.05)
+        assert r["coulomb_friction.amplitude_n.std"] > 0 and r["mass_kg.std"] > 0
+        assert "coulomb_friction" in r["effects"] and "coulomb_friction" in r["diagnosed"]
+        assert r["nrmse_after"] < r["nrmse_before"]
+    manifest = json.loads((out / "fleet.json").read_text())
+    assert set(manifest["reference"]) == {"sim_sha256", "sim_namespace"}
+    # the rows were made against the simulation: resuming against a plant file is refused
+    _one_line(_fleet(*args, "--plant", str(NOMINAL), "--resume"), "another reference")
+    # a simulator's recording that cannot be read is refused before any work
+    _one_line(_fleet(*args[:2], "--out", str(tmp_path / "new"), "--sim",
+                     str(tmp_path / "nosim")), "nosim")
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_simulation_fitted_once_gives_the_same_diagnosis() -> None:
+    """The row reuses the simulator's fitted plant (once per worker): the comparison is the
+    one ``diagnose --sim`` makes fitting it each time."""
+    from pmsm_sysid.api.fleet_row import _sim_fit
+    from pmsm_sysid.core.discrepancy import DiagnoseOptions
+    from pmsm_sysid.core.discrepancy.against import diagnose_sim
+
+    repo = NOMINAL.parents[1]
+    sim, real = repo / "bags" / "paper_speed_nominal", repo / "bags" / "paper_speed_coulomb"
+    each_time = ps.diagnose(None, real, sim=sim, replay=False, gfrf=False).to_dict()
+    sim_rec, fitted = _sim_fit(str(sim), None, 1e-3, 0.01, "x")
+    assert _sim_fit(str(sim), None, 1e-3, 0.01, "x")[1] is fitted  # once per process
+    once = diagnose_sim(sim_rec, ps.read_bag(real), None,
+                        DiagnoseOptions(replay=False, gfrf=False), sim_fit=fitted).to_dict()
+    for key in ("changes", "effects", "fit", "real_plant", "sim_plant", "corrected_plant"):
+        assert once[key] == each_time[key], key
+    assert [c["parameter"] for c in once["changes"]] == ["coulomb_friction.amplitude_n"]
+
+
 # ----------------------------------------------------------------------- a real cluster
 
 

@@ -164,23 +164,48 @@ class _Batch:
     axis_from: str
 
 
-def _batch(plant: PlantLike, namespace: str | None, axis_from: str, min_duration: float,
-           alpha: float, min_share: float, trend: TrendOptions) -> _Batch:
+def _reference(plant: PlantLike, sim: str | os.PathLike[str] | None,
+               sim_namespace: str | None) -> tuple[dict[str, Any], str, dict[str, Any]]:
+    """(row options, label, manifest entry) of the reference: a plant, or a simulator's
+    recording (read and checked here, before any work: it must identify a plant)."""
+    if sim is None:
+        model, label = resolve_plant(plant)
+        digest = hashlib.sha256(model.to_yaml().encode()).hexdigest()
+        return {"plant": model}, label, {"plant_sha256": digest}
+    if plant is not None:
+        raise OptionError("give either a plant or a recording of the simulator (sim), not "
+                          "both")
+    from ..batch.inputs import content_key
+    from ..core.plantfit.physical import check_identifiable
+    from ..core.selection.datacheck import check_sampling
+    from .diagnosis import _recording
+
+    rec = _recording(sim, "sim", sim_namespace)
+    check_sampling(rec.t, rec.sample_rate_hz, f"recording {sim}")
+    check_identifiable(rec, f"recording {sim}")
+    digest = content_key(Path(sim))
+    return ({"plant": None, "sim": os.fspath(sim), "sim_namespace": sim_namespace,
+             "sim_sha256": digest}, f"the simulator's recording {os.fspath(sim)}",
+            {"sim_sha256": digest, "sim_namespace": sim_namespace})
+
+
+def _batch(plant: PlantLike, sim: str | os.PathLike[str] | None, sim_namespace: str | None,
+           namespace: str | None, axis_from: str, min_duration: float, alpha: float,
+           min_share: float, trend: TrendOptions) -> _Batch:
     from ..batch.inputs import AXIS_FROM
     from ..validate import check_namespace
 
-    model, label = resolve_plant(plant)
-    if namespace is not None:
-        check_namespace(namespace, "namespace")
+    for name, value in (("namespace", namespace), ("sim_namespace", sim_namespace)):
+        if value is not None:
+            check_namespace(value, name)
     _checks.choice("axis_from", axis_from, AXIS_FROM)
     options = {"min_duration_s": _checks.positive("min_duration", min_duration),
                "alpha": _checks.fraction("alpha", alpha),
                "min_share": _checks.fraction("min_share", min_share)}
-    manifest = {"tool": "pmsm-sysid fleet", "plant": label,
-                "reference": {"plant_sha256": hashlib.sha256(
-                    model.to_yaml().encode()).hexdigest()},
+    reference, label, entry = _reference(plant, sim, sim_namespace)
+    manifest = {"tool": "pmsm-sysid fleet", "plant": label, "reference": entry,
                 "options": {**options, "namespace": namespace, "axis_from": axis_from}}
-    return _Batch({"plant": model, **options}, trend, manifest, namespace, axis_from)
+    return _Batch({**reference, **options}, trend, manifest, namespace, axis_from)
 
 
 def _todo(units: Sequence[Unit], done: set[str]) -> tuple[list[Unit], int, int]:
@@ -286,12 +311,16 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
           namespace: str | None = None, axis_from: str = "topic",
           min_duration: float = MIN_DURATION_S, alpha: float = 1e-3, min_share: float = 0.01,
           baseline: int = 8, z: float = 4.0, min_change: float = 0.02,
+          sim: str | os.PathLike[str] | None = None, sim_namespace: str | None = None,
           progress: Callable[[FleetProgress], None] | None = None) -> FleetResult:
     """Fit the physical plant of many recordings, diagnose a reference plant on each, in
     parallel on Dask, and follow every axis's parameters over time with drift alarms.
 
     ``recordings``: paths, directories (searched for rosbag2 recordings) or glob patterns.
-    ``plant``: the reference plant (a :class:`Plant`, a plant YAML path, None: nominal).
+    ``plant``: the reference plant (a :class:`Plant`, a plant YAML path, None: nominal);
+    or ``sim``, a recording of the user's own simulator as the reference (read with
+    ``sim_namespace``; its plant is fitted once per worker and each recording is compared
+    with it, as ``diagnose(None, real, sim=...)`` compares).
     Each axis of each recording becomes one row (:func:`pmsm_sysid.api.fleet_row.
     recording_row`): its fitted plant (:func:`fit_plant`) with standard errors and
     confidences, and the reference plant's fit before/after the diagnosed corrections
@@ -335,7 +364,8 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
     if scheduler is not None:
         check_address(scheduler)
     n = _default_workers() if workers is None else _checks.count("workers", workers, 1)
-    batch = _batch(plant, namespace, axis_from, min_duration, alpha, min_share,
+    batch = _batch(plant, sim, sim_namespace, namespace, axis_from, min_duration, alpha,
+                   min_share,
                    TrendOptions(_checks.count("baseline", baseline, 3),
                                 _checks.positive("z", z), _change(min_change)))
     out_path = None if out is None else Path(out)
@@ -386,6 +416,6 @@ def _finish(store: Store, batch: _Batch, out: Path | None,
     trends = fleet_trends(observations(rows), batch.trend)
     alarms = [alarm_dict(a) for a in fleet_alarms(trends)]
     files = {} if out is None else _outputs(
-        out, trends, alarms, rows, f"Fleet of axes against {batch.manifest['plant']}",
+        out, trends, alarms, rows, f"A fleet of axes against {batch.manifest['plant']}",
         batch.trend)
     return FleetResult(store.table(), alarms, trends, *counts, out=out, files=files)

@@ -1,8 +1,10 @@
-"""``pmsm-sysid fleet RECORDING... --plant PLANT --out DIR``: a fleet of axes.
+"""``pmsm-sysid fleet RECORDING... (--plant PLANT | --sim SIM_BAG) --out DIR``: a fleet of
+axes.
 
 For every recording (paths, directories searched for rosbag2 recordings, glob patterns) and
 every axis in it: the fitted physical plant (mass, viscous friction, the library's effects
-with standard errors and confidence) and the diagnosis of the reference plant on it, run in
+with standard errors and confidence) and the diagnosis of the reference on it (a plant
+file, or a recording of the user's simulator compared as ``diagnose --sim`` does), run in
 parallel on Dask distributed: a local cluster of ``--workers`` processes, or an existing
 cluster through ``--scheduler tcp://HOST:PORT``. One table, ``DIR/results.parquet`` (one row
 per recording axis, kept readable as it grows); per axis, each parameter against its own
@@ -29,8 +31,14 @@ OUTPUTS = {"json": "file"}
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recordings", nargs="*", metavar="RECORDING",
                    help="rosbag2 recordings: paths, directories (searched) or glob patterns")
-    p.add_argument("--plant", required=True, metavar="PLANT.yaml",
-                   help="the reference plant each recording is diagnosed against")
+    ref = p.add_mutually_exclusive_group(required=True)
+    ref.add_argument("--plant", metavar="PLANT.yaml",
+                     help="the reference plant each recording is diagnosed against")
+    ref.add_argument("--sim", metavar="SIM_BAG",
+                     help="a recording of your simulator as the reference instead (its plant "
+                          "is fitted once per worker, each recording compared with it)")
+    p.add_argument("--sim-namespace", type=ros_name, default=None,
+                   help="topic namespace or JointState topic of --sim (default: auto-detect)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output directory: results.parquet, alarms.json, index.html")
     where = p.add_mutually_exclusive_group()
@@ -106,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
     bars = _Bars()
     out = sys.stderr if args.json == "-" else sys.stdout
     try:
-        result = fleet(args.recordings, args.plant, scheduler=args.scheduler,
+        result = fleet(args.recordings, args.plant, sim=args.sim,
+                       sim_namespace=args.sim_namespace, scheduler=args.scheduler,
                        workers=args.workers, out=args.out, resume=args.resume,
                        force=args.force, namespace=args.namespace, axis_from=args.axis_from,
                        min_duration=args.min_duration, alpha=args.alpha,

@@ -58,11 +58,14 @@ FloatArray = NDArray[np.float64]
 
 def diagnose_sim(sim: Recording | Excerpt, real: Recording | Excerpt,
                  validate: Recording | Excerpt | None = None,
-                 options: DiagnoseOptions | None = None) -> DiagnoseResult:
-    """The module doc's method; raises DiagnoseError on unusable input."""
+                 options: DiagnoseOptions | None = None,
+                 sim_fit: PlantFitResult | None = None) -> DiagnoseResult:
+    """The module doc's method; raises DiagnoseError on unusable input. ``sim_fit``: the
+    simulator's recording already fitted (:func:`.fitted.fit_plant` with the same options),
+    so that many real recordings diagnosed against one simulation fit it once."""
     opts = options or DiagnoseOptions()
     try:
-        return _against(sim, real, validate, opts)
+        return _against(sim, real, validate, opts, sim_fit)
     except PmsmSysidError:
         raise
     except (ValueError, np.linalg.LinAlgError) as exc:
@@ -70,8 +73,9 @@ def diagnose_sim(sim: Recording | Excerpt, real: Recording | Excerpt,
 
 
 def _against(sim_rec: Recording | Excerpt, real_rec: Recording | Excerpt,
-             validate: Recording | Excerpt | None, opts: DiagnoseOptions) -> DiagnoseResult:
-    sim = fit_plant(sim_rec, None, opts)
+             validate: Recording | Excerpt | None, opts: DiagnoseOptions,
+             sim_fit: PlantFitResult | None = None) -> DiagnoseResult:
+    sim = sim_fit if sim_fit is not None else fit_plant(sim_rec, None, opts)
     real = fit_plant(real_rec, validate, opts)
     rows, notes, n_tests = compare(sim.physical, real.physical, opts.alpha)
     rows, notes = _rigid_cap(rows, sim, real), notes + _rigid_note(rows, sim, real)
