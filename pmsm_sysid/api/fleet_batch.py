@@ -5,143 +5,33 @@ each axis's fitted plant over time, with drift alarms. Needs the ``[fleet]`` ext
 from __future__ import annotations
 
 import hashlib
-import math
 import os
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from contextlib import ExitStack
-from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..core.errors import OptionError
-from ..core.fleet import Alarm, AxisTrend, Observation, TrendOptions, trended_parameters
+from ..core.fleet import AxisTrend, TrendOptions
 from . import _checks
+from .fleet_result import FleetProgress, FleetResult, alarm_dict, observations
 from .fleet_row import MIN_DURATION_S, recording_row
 from .simulation import PlantLike, resolve_plant
 
 if TYPE_CHECKING:
-    import pyarrow as pa
     from dask.distributed import Client
 
     from ..batch.inputs import Unit
     from ..batch.store import Store
 
+__all__ = ["FleetProgress", "FleetResult", "fleet"]
+
 RecordingsLike = str | os.PathLike[str] | Sequence[str | os.PathLike[str]]
 #: The table on disk is rewritten at most this often while rows come in (s); every row is
 #: on disk (its own part file) the moment it is finished.
 FLUSH_S = 5.0
-
-
-@dataclass(frozen=True)
-class FleetProgress:
-    """Where a batch is: ``total`` rows to analyse now, ``done`` of them (``failed``
-    included), ``skipped`` (analysed by an earlier run of a resumed batch)."""
-
-    total: int
-    done: int = 0
-    failed: int = 0
-    skipped: int = 0
-    stage: str = "analysing"
-
-
-def iso_utc(seconds: float) -> str:
-    """``2026-05-01T08:00:00.000000Z`` for a time in s since 1970."""
-    return datetime.fromtimestamp(seconds, UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
-
-
-def alarm_dict(a: Alarm) -> dict[str, Any]:
-    """One entry of ``alarms.json``."""
-    return {"axis": a.axis, "parameter": a.parameter, "recording": a.recording,
-            "start_time": iso_utc(a.start_time), "value": a.value, "baseline": a.baseline,
-            "band": [a.band[0], a.band[1]]}
-
-
-@dataclass(frozen=True)
-class FleetResult:
-    """The result of :func:`fleet`: ``table`` (pyarrow, one row per recording axis; the
-    Parquet file), ``alarms`` (the entries of ``alarms.json``) and ``trends`` (per axis,
-    every followed parameter with its baseline, band and points). Unpacks as
-    ``table, alarms = ps.fleet(...)``; :meth:`to_dict` is the ``fleet --json`` summary."""
-
-    table: pa.Table
-    alarms: list[dict[str, Any]]
-    trends: tuple[AxisTrend, ...]
-    analysed: int
-    """Rows analysed by this call."""
-    failed: int
-    """Of those, the rows with ``status: error``."""
-    skipped: int
-    """Recording axes already analysed in ``out`` (a resumed batch)."""
-    duplicates: int
-    """Recordings given twice (same content): analysed once."""
-    out: Path | None = None
-    files: dict[str, str] = field(default_factory=dict)
-
-    def __iter__(self) -> Iterator[Any]:
-        yield self.table
-        yield self.alarms
-
-    def axes(self) -> list[dict[str, Any]]:
-        """Per axis: recordings, failed ones, the latest, the state and what is in alarm."""
-        status = self.table.select(["axis", "status", "start_time"]).to_pylist()
-        out = []
-        for t in self.trends:
-            mine = [r for r in status if r["axis"] == t.axis]
-            latest = max((p.start_time for p in (t.parameters[0].points
-                                                 if t.parameters else ())), default=None)
-            out.append({
-                "axis": t.axis, "recordings": len(mine),
-                "failed": sum(1 for r in mine if r["status"] != "ok"), "state": t.state,
-                "latest": None if latest is None else iso_utc(latest),
-                "in_alarm": [{"parameter": p.parameter,
-                              "since": iso_utc(p.alarms[-1].start_time) if p.alarms else None}
-                             for p in t.in_alarm]})
-        return out
-
-    def to_dict(self) -> dict[str, Any]:
-        """The ``fleet --json`` summary (plain JSON values)."""
-        from ._json import plain
-
-        out: dict[str, Any] = plain({
-            "rows": self.table.num_rows, "analysed": self.analysed, "failed": self.failed,
-            "skipped": self.skipped, "duplicates": self.duplicates, "axes": self.axes(),
-            "alarms": self.alarms, "out": None if self.out is None else str(self.out),
-            "files": self.files})
-        return out
-
-    def summary(self) -> str:
-        """Lines for people: per axis its state, then the alarms."""
-        lines = []
-        for a in self.axes():
-            what = "; ".join(f"{p['parameter']} out of band since {p['since']}"
-                             for p in a["in_alarm"])
-            lines.append(f"  {a['axis']}: {a['state']}, {a['recordings']} recording(s)"
-                         + (f", {a['failed']} failed" if a["failed"] else "")
-                         + (f": {what}" if what else ""))
-        for al in self.alarms:
-            lines.append(f"alarm: {al['axis']} {al['parameter']} = {al['value']:.5g} "
-                         f"(baseline {al['baseline']:.5g}, band {al['band'][0]:.5g} .. "
-                         f"{al['band'][1]:.5g}) at {al['recording']} ({al['start_time']})")
-        return "\n".join(lines)
-
-
-def observations(rows: Sequence[Mapping[str, Any]]) -> list[Observation]:
-    """The analysed rows (status ok) as trend observations."""
-    names = trended_parameters()
-    out = []
-    for r in rows:
-        if r.get("status") != "ok" or r.get("start_time") is None:
-            continue
-        out.append(Observation(str(r.get("axis")), str(r.get("recording")),
-                               float(r["start_time"]), {p: _num(r.get(p)) for p in names},
-                               {p: _num(r.get(p + ".std")) for p in names}))
-    return out
-
-
-def _num(x: Any) -> float | None:
-    return float(x) if isinstance(x, (int, float)) and math.isfinite(x) else None
 
 
 def _as_list(recordings: RecordingsLike) -> list[str]:
@@ -321,8 +211,9 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
     or ``sim``, a recording of the user's own simulator as the reference (read with
     ``sim_namespace``; its plant is fitted once per worker and each recording is compared
     with it, as ``diagnose(None, real, sim=...)`` compares).
-    Each axis of each recording becomes one row (:func:`pmsm_sysid.api.fleet_row.
-    recording_row`): its fitted plant (:func:`fit_plant`) with standard errors and
+    Each axis of each recording becomes one row
+    (:func:`pmsm_sysid.api.fleet_row.recording_row`): its fitted plant (:func:`fit_plant`)
+    with standard errors and
     confidences, and the reference plant's fit before/after the diagnosed corrections
     (:func:`diagnose`). Runs on ``client`` (a ``dask.distributed.Client`` of yours, left
     open), on the cluster whose scheduler is at ``scheduler`` (``tcp://HOST:PORT``), or on a
@@ -335,8 +226,8 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
     ``force=True`` starts it again. Trends: per axis, each parameter against the median of
     its first ``baseline`` recordings, in a band from their spread and each recording's
     standard error at ``z`` standard deviations, never narrower than ``min_change`` of the
-    baseline (:mod:`pmsm_sysid.core.fleet.trends` states the rule). ``progress`` is called with a
-    :class:`FleetProgress` after each row.
+    baseline (:mod:`pmsm_sysid.core.fleet.trends` states the rule). ``progress`` is called
+    with a :class:`FleetProgress` after each row.
 
     Returns a :class:`FleetResult`; ``table, alarms = ps.fleet(...)`` unpacks it.
 
@@ -356,25 +247,36 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
     from ..batch.cluster import require_extra
 
     require_extra()  # before anything imports Dask or pyarrow
-    from ..batch.cluster import check_address, check_workers, connect
+    from ..batch.cluster import check_address
     from ..batch.inputs import expand
-    from ..batch.store import Store, check_out_dir
+    from ..batch.store import check_out_dir
 
     _check_client(client, scheduler)
     if scheduler is not None:
         check_address(scheduler)
     n = _default_workers() if workers is None else _checks.count("workers", workers, 1)
     batch = _batch(plant, sim, sim_namespace, namespace, axis_from, min_duration, alpha,
-                   min_share,
-                   TrendOptions(_checks.count("baseline", baseline, 3),
-                                _checks.positive("z", z), _change(min_change)))
+                   min_share, TrendOptions(_checks.count("baseline", baseline, 3),
+                                           _checks.positive("z", z), _change(min_change)))
     out_path = None if out is None else Path(out)
     if resume and out_path is None:
         raise OptionError("resume needs out (the directory of the batch to resume)")
     resuming = out_path is not None and check_out_dir(out_path, resume=resume, force=force)
     paths = expand(_as_list(recordings))
-    report = progress or (lambda p: None)
-    store = Store(out_path)
+    return _run(paths, batch, out_path, resuming, (client, scheduler, n),
+                progress or (lambda p: None))
+
+
+def _run(paths: Sequence[Path], batch: _Batch, out: Path | None, resuming: bool,
+         where: tuple[Client | None, str | None, int],
+         report: Callable[[FleetProgress], None]) -> FleetResult:
+    """Connect (a scheduler answers, or no work is done), read the recordings, analyse
+    what is not done yet, keep every row, then the trends."""
+    from ..batch.cluster import check_workers, connect
+    from ..batch.store import Store
+
+    client, scheduler, n = where
+    store = Store(out)
     with ExitStack() as stack:
         sched = None if scheduler is None else connect(scheduler)  # before any work
         if sched is not None:
@@ -393,7 +295,7 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
         finally:
             store.flush()
         store.close()
-    return _finish(store, batch, out_path, (len(todo), failed, skipped, dup))
+    return _finish(store, batch, out, (len(todo), failed, skipped, dup))
 
 
 def _units(paths: Sequence[Path], batch: _Batch,
