@@ -100,7 +100,7 @@ def test_without_the_fleet_extra_the_verb_names_it(tmp_path: Path) -> None:
                            str(NOMINAL), "--out", str(tmp_path / "out")],
                           capture_output=True, text=True, timeout=300, check=False)
     _one_line(proc, "fleet needs dask[distributed] and pyarrow",
-              "pip install 'pmsm_sysid[fleet]'")
+              "pip install '.[fleet]' (in the pmsm_sysid source directory)")
     assert not (tmp_path / "out").exists()
 
 

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..core.errors import OptionError
 from ..core.fleet import AxisTrend, TrendOptions
+from ..core.recording.spans import MAX_SAMPLES, MIN_SPAN, SPANS
 from . import _checks
 from .fleet_result import FleetProgress, FleetResult, alarm_dict, observations
 from .fleet_row import MIN_DURATION_S, recording_row
@@ -55,7 +56,8 @@ class _Batch:
 
 
 def _reference(plant: PlantLike, sim: str | os.PathLike[str] | None,
-               sim_namespace: str | None) -> tuple[dict[str, Any], str, dict[str, Any]]:
+               sim_namespace: str | None,
+               options: dict[str, Any]) -> tuple[dict[str, Any], str, dict[str, Any]]:
     """(row options, label, manifest entry) of the reference: a plant, or a simulator's
     recording (read and checked here, before any work: it must identify a plant)."""
     if sim is None:
@@ -67,12 +69,11 @@ def _reference(plant: PlantLike, sim: str | os.PathLike[str] | None,
                           "both")
     from ..batch.inputs import content_key
     from ..core.plantfit.physical import check_identifiable
-    from ..core.selection.datacheck import check_sampling
-    from .diagnosis import _recording
+    from .fleet_row import _options, _read
 
-    rec = _recording(sim, "sim", sim_namespace)
-    check_sampling(rec.t, rec.sample_rate_hz, f"recording {sim}")
-    check_identifiable(rec, f"recording {sim}")
+    opts = _options(options["alpha"], options["min_share"], options["max_samples"])
+    ex = _read(sim, sim_namespace, None, opts, "simulated recording")
+    check_identifiable(ex.parts, f"simulated recording {os.fspath(sim)}")
     digest = content_key(Path(sim))
     return ({"plant": None, "sim": os.fspath(sim), "sim_namespace": sim_namespace,
              "sim_sha256": digest}, f"the simulator's recording {os.fspath(sim)}",
@@ -80,8 +81,8 @@ def _reference(plant: PlantLike, sim: str | os.PathLike[str] | None,
 
 
 def _batch(plant: PlantLike, sim: str | os.PathLike[str] | None, sim_namespace: str | None,
-           namespace: str | None, axis_from: str, min_duration: float, alpha: float,
-           min_share: float, trend: TrendOptions) -> _Batch:
+           namespace: str | None, axis_from: str, numbers: tuple[float, float, float, int],
+           trend: TrendOptions) -> _Batch:
     from ..batch.inputs import AXIS_FROM
     from ..validate import check_namespace
 
@@ -89,10 +90,12 @@ def _batch(plant: PlantLike, sim: str | os.PathLike[str] | None, sim_namespace: 
         if value is not None:
             check_namespace(value, name)
     _checks.choice("axis_from", axis_from, AXIS_FROM)
+    min_duration, alpha, min_share, max_samples = numbers
     options = {"min_duration_s": _checks.positive("min_duration", min_duration),
                "alpha": _checks.fraction("alpha", alpha),
-               "min_share": _checks.fraction("min_share", min_share)}
-    reference, label, entry = _reference(plant, sim, sim_namespace)
+               "min_share": _checks.fraction("min_share", min_share),
+               "max_samples": _checks.count("max_samples", max_samples, SPANS * MIN_SPAN)}
+    reference, label, entry = _reference(plant, sim, sim_namespace, options)
     manifest = {"tool": "pmsm-sysid fleet", "plant": label, "reference": entry,
                 "options": {**options, "namespace": namespace, "axis_from": axis_from}}
     return _Batch({**reference, **options}, trend, manifest, namespace, axis_from)
@@ -200,7 +203,8 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
           out: str | os.PathLike[str] | None = None, resume: bool = False, force: bool = False,
           namespace: str | None = None, axis_from: str = "topic",
           min_duration: float = MIN_DURATION_S, alpha: float = 1e-3, min_share: float = 0.01,
-          baseline: int = 8, z: float = 4.0, min_change: float = 0.02,
+          max_samples: int = MAX_SAMPLES, baseline: int = 8, z: float = 4.0,
+          min_change: float = 0.02,
           sim: str | os.PathLike[str] | None = None, sim_namespace: str | None = None,
           progress: Callable[[FleetProgress], None] | None = None) -> FleetResult:
     """Fit the physical plant of many recordings, diagnose a reference plant on each, in
@@ -213,9 +217,11 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
     with it, as ``diagnose(None, real, sim=...)`` compares).
     Each axis of each recording becomes one row
     (:func:`pmsm_sysid.api.fleet_row.recording_row`): its fitted plant (:func:`fit_plant`)
-    with standard errors and
-    confidences, and the reference plant's fit before/after the diagnosed corrections
-    (:func:`diagnose`). Runs on ``client`` (a ``dask.distributed.Client`` of yours, left
+    with standard errors and confidences, and the reference plant's fit before/after the
+    diagnosed corrections (:func:`diagnose`); ``alpha``, ``min_share`` and ``max_samples``
+    (a longer recording is used in ten spans spread evenly over it, of a bag only those are
+    read) as in :func:`diagnose`; a recording shorter than ``min_duration`` s is a row with
+    status error. Runs on ``client`` (a ``dask.distributed.Client`` of yours, left
     open), on the cluster whose scheduler is at ``scheduler`` (``tcp://HOST:PORT``), or on a
     local cluster of ``workers`` processes (default: one per CPU).
 
@@ -255,9 +261,10 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
     if scheduler is not None:
         check_address(scheduler)
     n = _default_workers() if workers is None else _checks.count("workers", workers, 1)
-    batch = _batch(plant, sim, sim_namespace, namespace, axis_from, min_duration, alpha,
-                   min_share, TrendOptions(_checks.count("baseline", baseline, 3),
-                                           _checks.positive("z", z), _change(min_change)))
+    batch = _batch(plant, sim, sim_namespace, namespace, axis_from,
+                   (min_duration, alpha, min_share, max_samples),
+                   TrendOptions(_checks.count("baseline", baseline, 3),
+                                _checks.positive("z", z), _change(min_change)))
     out_path = None if out is None else Path(out)
     if resume and out_path is None:
         raise OptionError("resume needs out (the directory of the batch to resume)")

@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 
     from .inputs import Unit
 
-EXTRA = "pip install 'pmsm_sysid[fleet]'"
+EXTRA = "pip install '.[fleet]' (in the pmsm_sysid source directory)"
 #: How long a scheduler address may take to answer, and workers to show up (s).
 CONNECT_TIMEOUT_S = 5.0
 WORKERS_TIMEOUT_S = 10.0

@@ -19,7 +19,7 @@ import argparse
 import sys
 from typing import Any
 
-from .common import count, number, parse_fraction, ros_name, write_json
+from .common import budget, count, number, parse_fraction, ros_name, write_json
 
 HELP = ("many recordings in parallel on Dask: each axis's fitted plant, a Parquet table, "
         "per-axis trends and drift alarms")
@@ -64,6 +64,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(default 1e-3)")
     p.add_argument("--min-share", type=parse_fraction, default=0.01,
                    help="smallest share of the mismatch an effect must explain (default 0.01)")
+    p.add_argument("--max-samples", type=budget, default=120_000, metavar="N",
+                   help="samples used at most of each recording (default 120000); a longer "
+                        "one is used in ten spans spread evenly over it, and only those are "
+                        "read")
     p.add_argument("--baseline", type=count(3, 10_000), default=8, metavar="N",
                    help="an axis's first N recordings are its baseline (default 8)")
     p.add_argument("--band", type=number(0, 100, low_open=True), default=4.0, metavar="Z",
@@ -119,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
                        workers=args.workers, out=args.out, resume=args.resume,
                        force=args.force, namespace=args.namespace, axis_from=args.axis_from,
                        min_duration=args.min_duration, alpha=args.alpha,
-                       min_share=args.min_share, baseline=args.baseline, z=args.band,
+                       min_share=args.min_share, max_samples=args.max_samples,
+                       baseline=args.baseline, z=args.band,
                        min_change=args.min_change, progress=bars)
     except KeyboardInterrupt:
         bars.close()
