@@ -24,6 +24,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 import pmsm_sysid as ps
+from pmsm_sysid.api.fleet_row import recording_row
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 DEADLINE_S = 900.0  # generous: only to end a hung test, never a performance check
@@ -154,6 +155,7 @@ def _unreadable_bag(path: Path) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_bad_recordings_are_rows_with_their_reason_and_the_batch_goes_on(
         tmp_path: Path) -> None:
     good = recording(tmp_path / "good", drive(), seed=1, day=0)
@@ -196,6 +198,7 @@ def _parts(out: Path) -> list[Path]:
     return sorted((out / "parts").glob("*.parquet")) if (out / "parts").is_dir() else []
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(1800)
 def test_a_batch_killed_half_way_resumes_without_losing_or_repeating_a_row(
         tmp_path: Path, five_recordings: list[Path]) -> None:
@@ -242,6 +245,7 @@ def test_a_batch_killed_half_way_resumes_without_losing_or_repeating_a_row(
 # ----------------------------------------------------------------------- --sim
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(1800)
 def test_a_recording_of_the_simulator_is_the_reference_with_sim(
         tmp_path: Path, five_recordings: list[Path]) -> None:
@@ -269,6 +273,7 @@ def test_a_recording_of_the_simulator_is_the_reference_with_sim(
     assert not (tmp_path / "new").exists()
 
 
+@pytest.mark.slow
 def test_a_simulation_fitted_once_gives_the_same_diagnosis() -> None:
     """The row reuses the simulator's fitted plant (once per worker): the comparison is the
     one ``diagnose --sim`` makes fitting it each time."""
@@ -279,10 +284,10 @@ def test_a_simulation_fitted_once_gives_the_same_diagnosis() -> None:
     repo = NOMINAL.parents[1]
     sim, real = repo / "bags" / "paper_speed_nominal", repo / "bags" / "paper_speed_coulomb"
     each_time = ps.diagnose(None, real, sim=sim, replay=False, gfrf=False).to_dict()
-    sim_rec, fitted = _sim_fit(str(sim), None, 1e-3, 0.01, "x")
-    assert _sim_fit(str(sim), None, 1e-3, 0.01, "x")[1] is fitted  # once per process
-    once = diagnose_sim(sim_rec, ps.read_bag(real), None,
-                        DiagnoseOptions(replay=False, gfrf=False), sim_fit=fitted).to_dict()
+    opts = DiagnoseOptions(replay=False, gfrf=False)
+    sim_rec, fitted = _sim_fit(str(sim), None, opts, "x")
+    assert _sim_fit(str(sim), None, opts, "x")[1] is fitted  # once per process
+    once = diagnose_sim(sim_rec, ps.read_bag(real), None, opts, sim_fit=fitted).to_dict()
     for key in ("changes", "effects", "fit", "real_plant", "sim_plant", "corrected_plant"):
         assert once[key] == each_time[key], key
     assert [c["parameter"] for c in once["changes"]] == ["coulomb_friction.amplitude_n"]
@@ -323,6 +328,7 @@ def dask_cluster(tmp_path: Path) -> Iterator[str]:
                 p.wait()
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(1800)
 def test_the_same_command_runs_on_a_dask_cluster(tmp_path: Path, dask_cluster: str,
                                                  five_recordings: list[Path]) -> None:
@@ -341,3 +347,27 @@ def test_the_same_command_runs_on_a_dask_cluster(tmp_path: Path, dask_cluster: s
     # the rows were the cluster's tasks, each run to its result (counts of state entries)
     assert ran["recording_row"]["memory"] == 2, ran
     assert [w["name"] for w in workers.values()] == ["fleet-test-worker"]
+
+
+# ----------------------------------------------------------------------- long recordings
+
+
+@pytest.mark.slow
+def test_a_long_recording_is_used_in_the_spans_fit_plant_and_diagnose_use(
+        tmp_path: Path) -> None:
+    """A recording longer than max_samples: the row holds the numbers of ``fit_plant`` and
+    ``diagnose`` with the same budget (the same ten spans, read once), the whole recording's
+    duration and the samples used."""
+    bag = recording(tmp_path / "long", drive(), seed=5, day=0, duration=60.0)
+    row = recording_row(bag, ps.Plant.from_yaml(NOMINAL), max_samples=20_000)
+    assert row["status"] == "ok", row["error"]
+    assert row["samples"] == 20_000 and row["duration_s"] == pytest.approx(60.0, abs=0.01)
+    fit = ps.fit_plant(bag, max_samples=20_000)
+    assert fit.excerpt is not None and fit.excerpt.used == 20_000
+    assert row["mass_kg"] == fit.plant.mass_kg
+    assert row["mass_kg.std"] == fit.std["mass_kg"]
+    assert row["coulomb_friction.amplitude_n"] == fit.plant.coulomb_friction.amplitude_n
+    found = ps.diagnose(NOMINAL, bag, replay=False, gfrf=False, max_samples=20_000).to_dict()
+    assert row["nrmse_before"] == found["fit"]["validation"]["nrmse_before"]
+    assert row["nrmse_after"] == found["fit"]["validation"]["nrmse_after"]
+    assert row["diagnosed"] == [e["name"] for e in found["effects"]] == ["coulomb_friction"]
