@@ -85,17 +85,13 @@ def _peak_rss_mb() -> float:
 
 
 def on_dask(root: Path, workers: int) -> dict[str, Any]:
-    """``ps.fleet`` on a fresh local cluster, timed from the cluster's start."""
-    import logging
-
-    from dask.distributed import Client, LocalCluster
-
+    """``ps.fleet`` on a fresh local cluster made as the command makes it
+    (:func:`pmsm_sysid.batch.cluster.local_cluster`), timed from the cluster's start."""
     import pmsm_sysid as ps
+    from pmsm_sysid.batch.cluster import local_cluster
 
     start, cpu = time.perf_counter(), _cpu_s()
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                      dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
-            Client(cluster) as client:
+    with local_cluster(workers) as client:
         result = ps.fleet(str(root), plant=REPO / "plants" / "nominal.yaml", client=client)
         seconds = time.perf_counter() - start
         peaks = sorted(client.run(_peak_rss_mb).values())

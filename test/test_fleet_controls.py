@@ -27,7 +27,7 @@ from pmsm_sysid.core.physics.closed_loop import (
 from pmsm_sysid.core.physics.excitation import make_excitation
 from pmsm_sysid.core.physics.motor import simulate
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("fleet_controls")]
 
 DAYS = 12
 SECONDS = 10.0
@@ -57,6 +57,7 @@ AXES = {"/open_thrust_noise": (NOISY, _open_loop), "/closed": (TRUTH, _closed_lo
 @pytest.fixture(scope="module")
 def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[ps.FleetResult, dict[str, Any]]:
     root = tmp_path_factory.mktemp("fleet_controls")
+    (root / "recordings").mkdir()
     seed = 7000
     for k, (axis, (plant, make)) in enumerate(AXES.items()):
         for day in range(DAYS):

@@ -22,7 +22,7 @@ import pmsm_sysid as ps
 from pmsm_sysid.core.physics.plant import Cogging, CoulombFriction
 from pmsm_sysid.plots.fleet import axis_trends
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("fleet_simulated")]
 
 BASELINE = 8  # the default
 COULOMB = [1.0] * BASELINE + [1.1, 1.2, 1.3]
