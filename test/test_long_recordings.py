@@ -139,12 +139,13 @@ def test_a_line_is_found_in_spans_and_noise_keeps_its_level() -> None:
     dof = line_dof(len(sizes))
     alarms = 0
     for _ in range(100):
-        f, _, ratio, bins = strongest_line(rng.standard_normal(6000), t, 100.0, None, sizes)
+        f, _, ratio, bins, _ = strongest_line(rng.standard_normal(6000), t, 100.0, None,
+                                              sizes)
         logp = stats.f.logsf(ratio, *dof) / np.log(10) + np.log10(bins)
         alarms += logp < np.log10(0.05)
     assert alarms <= 12  # the 5 % level (binomial: 5 expected, 12 at p ~ 0.003)
     r = 0.5 * np.sin(2 * np.pi * 7.3 * t) + rng.standard_normal(6000)
-    f, _, ratio, bins = strongest_line(r, t, 100.0, None, sizes)
+    f, _, ratio, bins, _ = strongest_line(r, t, 100.0, None, sizes)
     assert f == pytest.approx(7.3, abs=0.05)
     assert stats.f.logsf(ratio, *dof) / np.log(10) + np.log10(bins) < -6
 

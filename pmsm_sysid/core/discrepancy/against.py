@@ -114,7 +114,7 @@ def _data(plant: Plant, pf: PhysicalFit, segment: str) -> EquationData:
     fit built its own (same filter, kinematic mode and loop)."""
     d = pf.segs.est if segment == "estimation" else pf.segs.val
     return equation_data_parts(plant, pf.segs.pieces(segment), d.filt, d.mode,
-                               pf.setup.closed)
+                               pf.setup.closed, d.thrust_gap)
 
 
 class Residuals:

@@ -43,7 +43,7 @@ from .gfrf_compare import gfrf_where
 from .nonparam import AxisModel
 from .result import Curves, DiagnoseResult
 from .rival import AXIS_EFFECTS, Rival, as_found, rivals
-from .showfit import fit_table, replay_notes, scan_unexplained, where_table
+from .showfit import beside_curves, fit_table, replay_notes, scan_unexplained, where_table
 
 _CLOSED_NOTE = ("the thrust responds to sensor noise (closed loop): thrust_lag and "
                 "transport_delay were not searched -- the thrust's own noise would fake them")
@@ -92,6 +92,7 @@ def _diagnose(plant: Plant, real: Recording | Excerpt, validate: Recording | Exc
     curves = scan_unexplained(ef.final, ef.data, opts.alpha, opts.min_share,
                               (model.fit, segs.est), segs.val, closed)
     rv = rivals(model.fit, segs.est, segs.val, not closed, opts.alpha)
+    curves = beside_curves(curves, [r.model for r in rv], (model.fit, segs.est), segs.val)
     found = _cap(list(ef.found), curves, rv)
     beaten = {r.axis for r in rv}
     unconfirmed = [e for e, _ in curves if e.held_out is not None and not e.held_out.confirmed]
@@ -193,6 +194,8 @@ def _method(segs: Segments, opts: DiagnoseOptions, n_tests: float,
         "significance": "-log10 of the Bonferroni-corrected p-value (prewhitened F-test)",
         "sign_smoothing_mps": segs.est.sign_smoothing_mps,
         "data_used": segs.used, "max_samples": opts.max_samples,
+        "thrust_reading": {"noise_n": segs.thrust_noise_n,
+                           "gap_samples": segs.est.thrust_gap},
     }
 
 

@@ -81,6 +81,10 @@ def _velocity_details(r: FloatArray, v: FloatArray) -> dict[str, Any]:
 
 
 NEIGHBOURS = 8  # bins each side that set the local noise level of a spectral line
+#: A line's frequency is refined over ±1 bin, so each bin searched stands for three: the
+#: Bonferroni count of the line test (on white and coloured noise the refined peak over
+#: its local level exceeds the F(2, 28) tail about twice as often as one bin does).
+REFINED = 3
 
 
 def _ratio(spec: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -101,7 +105,7 @@ def _line_at(rc: FloatArray, tt: FloatArray, f: float) -> float:
 
 
 def strongest_line(r: FloatArray, t: FloatArray, fs: float, u: FloatArray | None = None,
-                   sizes: tuple[int, ...] = ()) -> tuple[float, float, float, int]:
+                   sizes: tuple[int, ...] = ()) -> tuple[float, float, float, int, float]:
     """The residual's most prominent spectral line, judged against its neighbours.
 
     A line is a bin whose power stands out of the residual's own spectrum around it (the
@@ -117,7 +121,7 @@ def strongest_line(r: FloatArray, t: FloatArray, fs: float, u: FloatArray | None
     K periodograms has 2K degrees of freedom per bin (:func:`line_dof`).
 
     Returns (frequency Hz, power share of the refined line, ratio to the local level,
-    number of bins searched).
+    number of bins searched, share of the power of the bins around it).
     """
     pieces = _pieces(r, t, sizes)
     n = min(len(p[0]) for p in pieces)
@@ -133,7 +137,7 @@ def strongest_line(r: FloatArray, t: FloatArray, fs: float, u: FloatArray | None
         uratio, _ = _ratio(uspec)
         ok &= uratio < math.log(len(spec) / 1e-3)  # no significant input line at that bin
     if not ok.any():
-        return 0.0, 0.0, 0.0, 1
+        return 0.0, 0.0, 0.0, 1, 0.0
     k = int(np.flatnonzero(ok)[np.argmax(ratio[ok])])
     bin_hz = fs / n
     best = (float(spec[k]), float(freqs[k]))
@@ -143,7 +147,9 @@ def strongest_line(r: FloatArray, t: FloatArray, fs: float, u: FloatArray | None
             best = max(best, (power, float(f)))
     energy = float(np.mean([rc @ rc for rc, _ in rcs]))
     share = 2.0 * best[0] / n / max(energy, 1e-300)
-    return best[1], min(share, 1.0), best[0] / max(float(level[k]), 1e-300), int(ok.sum())
+    band = float(spec[max(k - NEIGHBOURS, 0):k + NEIGHBOURS + 1].sum())
+    return (best[1], min(share, 1.0), best[0] / max(float(level[k]), 1e-300), int(ok.sum()),
+            min(best[0] / max(band, 1e-300), 1.0))
 
 
 def _pieces(r: FloatArray, t: FloatArray,
@@ -176,14 +182,14 @@ def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
     """
     t = thinned_times(data)
     x = thinned(data, data.x)
-    v = thinned(data, data.v)
+    v = thinned(data, data.v_axis)
     _, r = lstsq(base, y)
     yy = float(y @ y) if total is None else total
     out = []
     bases = {"time": _bins(t, n_bins, False)[0], "position": _bins(x, n_bins, True)[0],
              "velocity": _bins(v, n_bins, True)[0]}
     if thrust:  # open loop only: under feedback the thrust carries the sensor noise
-        bases["thrust"] = _bins(thinned(data, data.force), n_bins, True)[0]
+        bases["thrust"] = _bins(thinned(data, data.thrust_axis), n_bins, True)[0]
     n_freq = len(r) // 2
     for axis, ind in bases.items():
         test = nested_f_test(y, base, ind, null_whitening=null_whitening)
@@ -193,7 +199,7 @@ def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
         if axis == "time":
             details = _time_details(r, t, ind)
         elif axis in ("position", "thrust"):
-            vals = x if axis == "position" else thinned(data, data.force)
+            vals = x if axis == "position" else thinned(data, data.thrust_axis)
             details = {"bin_means_n": _bin_means(r, ind).tolist(),
                        f"{axis}_range": [float(vals.min()), float(vals.max())]}
         else:
@@ -201,15 +207,16 @@ def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
         out.append(AxisFinding(axis, share, -test.corrected_log10_p(len(bases) + 1), details))
     u = data.project(data.force)
     sizes = thinned_sizes(data)
-    f0, line_share, ratio, n_freq = strongest_line(r, t, data.sample_rate_hz, u, sizes)
+    f0, line_share, ratio, n_freq, local = strongest_line(r, t, data.sample_rate_hz, u,
+                                                         sizes)
     cols = _sincos(t - t[0], f0)
     _, r1 = lstsq(np.hstack([base, cols]), y)
     dof1, dof2 = line_dof(max(1, len(sizes)))
     logp = float(stats.f.logsf(ratio, dof1, dof2)) / math.log(10.0) if f0 > 0 else 0.0
-    sig = max(0.0, -(logp + math.log10(len(bases) + n_freq)))
+    sig = max(0.0, -(logp + math.log10(len(bases) + REFINED * n_freq)))
     out.append(AxisFinding("frequency", float(r @ r - r1 @ r1) / yy, sig,
                            {"line_hz": f0, "line_power_share": line_share,
-                            "line_to_local_level": ratio}))
+                            "line_to_local_level": ratio, "line_local_share": local}))
     every = {**bases, "frequency": cols}
     alone = {f.axis: f.share for f in out}
     for axis, (more, share) in (extra or {}).items():

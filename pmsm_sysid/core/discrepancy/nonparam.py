@@ -78,7 +78,7 @@ class AxisModel:
         """The line and noise lean (coefficients given) at the regression samples."""
         out: FloatArray = np.zeros(data.n)
         if line is not None:
-            out = out + line * data.project(data.force)
+            out = out + line * data.project(data.thrust_axis)
         if self.lean is not None:
             out = out + lean * data.project(noise_lean(data.force))
         return out
@@ -167,9 +167,9 @@ def axis_values(data: EquationData, axis: str) -> FloatArray:
     if axis in ("position", "position_friction"):
         return data.x
     if axis == "velocity":
-        return data.v
+        return data.v_axis
     if axis == "thrust":
-        return data.force
+        return data.thrust_axis
     out: FloatArray = data.t
     return out
 
@@ -221,7 +221,7 @@ def fit_axis(data: EquationData, y: FloatArray, base: FloatArray, axis: str,
 
 def beside_thrust(data: EquationData, lean: bool) -> FloatArray:
     """The columns fitted beside a curve over thrust: the line, and the noise lean."""
-    cols = [data.project(data.force)] + ([data.project(noise_lean(data.force))] if lean
+    cols = [data.project(data.thrust_axis)] + ([data.project(noise_lean(data.force))] if lean
                                          else [])
     return np.column_stack(cols)
 

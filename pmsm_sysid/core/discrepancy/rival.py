@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..plantfit.estimate import Fit, contributions, design
+from ..plantfit.estimate import Fit, contributions, design, remainder_of
 from ..plantfit.found import FoundEffect
 from ..plantfit.kinematics import EquationData
 from ..plantfit.library import MIN_PERIODS, periods_seen
@@ -59,11 +59,13 @@ def _fit(fit: Fit, keep: tuple[int, ...], est: EquationData, val: EquationData,
     """Curve ``kind`` with the effects ``keep``: model, est SSE, held-out error, -log10 p."""
     rest = tuple(fit.effects[k] for k in keep)
     X, fixed = design(rest, est)
-    model, beta, sse = fit_axis_with(est, est.y - fixed, X, kind)
+    y = est.y - fixed - remainder_of(fit, est, keep)
+    model, beta, sse = fit_axis_with(est, y, X, kind)
     Xv, fv = design(rest, val)
-    err = val.y - fv - (Xv @ beta if Xv.shape[1] else 0.0) - model.force(val)
+    err = val.y - fv - remainder_of(fit, val, keep) - (Xv @ beta if Xv.shape[1] else 0.0) \
+        - model.force(val)
     cols = est.project(model.raw(est))
-    test = nested_f_test(est.y - fixed, X, cols, null_whitening=True)
+    test = nested_f_test(y, X, cols, null_whitening=True)
     return model, sse, err, -test.corrected_log10_p(4.0)
 
 
@@ -91,7 +93,8 @@ def rivals(fit: Fit, est: EquationData, val: EquationData, thrust: bool,
         if wins and best[3] > -math.log10(alpha):
             rest = tuple(fit.effects[k] for k in keep)
             X, fixed = design(rest, est)
-            share = share_of(est.y - fixed, X, est.project(best[0].raw(est)))
+            share = share_of(est.y - fixed - remainder_of(fit, est, keep), X,
+                             est.project(best[0].raw(est)))
             out.append(Rival(axis, best[0], held,
                              tuple(fit.effects[k].name for k in group), best[3], share))
     best_of: dict[str, Rival] = {}

@@ -16,15 +16,16 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..physics.plant import Plant
-from ..plantfit.estimate import Fit, contributions, design
+from ..plantfit.estimate import Fit, contributions, design, remainder_of
 from ..plantfit.found import FoundEffect
-from ..plantfit.kinematics import EquationData
+from ..plantfit.kinematics import EquationData, thinned_sizes
 from ..plantfit.library import columns
 from ..plantfit.select import Step
 from ..plantfit.stats import (
@@ -89,7 +90,7 @@ def scan_unexplained(fit: Fit, data: EquationData, alpha: float, min_share: floa
     the reading noise's own bend beside it (:mod:`.nonparam`).
     """
     X, fixed = design(fit.effects, data)
-    y = data.y - fixed
+    y = data.y - fixed - remainder_of(fit, data)
     found = scan_axes(data, y, X, total=float(data.y @ data.y), null_whitening=True)
     axes = ["position", "velocity"] + (["thrust"] if closed else [])
     n_tests = len(found) + sum(len(CURVE_KINDS[a]) for a in axes)
@@ -99,11 +100,15 @@ def scan_unexplained(fit: Fit, data: EquationData, alpha: float, min_share: floa
     out = []
     for axis, f in tested.items():
         sig, share = f.significance - np.log10(n_tests / (len(found) + 1)), f.share
+        relevant = share
+        if axis == "frequency":  # a line's relevance is judged where it lives: among its
+            relevant = max(share, float(f.details.get("line_local_share", 0.0)))  # neighbours
         kinds = CURVE_KINDS[axis]
         if axis in axes:
             sig_c, share_c, kind = _curve_evidence(axis, data, y, X, n_tests, closed, lean)
             sig, share, kinds = max(sig, sig_c), max(share, share_c), (kind,)
-        if sig > -np.log10(alpha) and share >= min_share:
+            relevant = share
+        if sig > -np.log10(alpha) and relevant >= min_share:
             model, held = _curve(kinds, est, val, closed,
                                  float(f.details.get("line_hz", 0.0)) if axis == "frequency"
                                  else 0.0, lean)
@@ -112,7 +117,58 @@ def scan_unexplained(fit: Fit, data: EquationData, alpha: float, min_share: floa
             out.append((FoundEffect(
                 "unexplained", {"axis": axis, **model.describe(), **f.details}, {},
                 sig, share, held, conf, (text,)), model))
-    return out
+    part = min(thinned_sizes(data) or (data.n,))  # a line's bin is a part's (spans)
+    return _one_sinusoid(out, part / data.sample_rate_hz)
+
+
+def beside_curves(out: list[tuple[FoundEffect, AxisModel]], more: list[AxisModel],
+                  est: tuple[Fit, EquationData], val: EquationData,
+                  ) -> list[tuple[FoundEffect, AxisModel]]:
+    """A sinusoid over time judged beside the confirmed curves over the other axes (those
+    of ``out`` and ``more``, the curves that beat a library group).
+
+    A force over position met on a repeated move comes back with the move's period, so
+    its line shows over time too (on the EMPS rig: the end-of-stroke force as a 0.32 Hz
+    "disturbance"). The sinusoid keeps its place only if, fitted with those curves, it
+    still lowers the held-out error; its held-out test becomes that conditional one.
+    """
+    others = [m for e, m in out if m.axis != "time" and e.held_out is not None
+              and e.held_out.significant] + more
+    if not others or all(m.axis != "time" for _, m in out):
+        return out
+    fit, d = est
+    X, fixed = design(fit.effects, d)
+    y = d.y - fixed - remainder_of(fit, d)
+    base = np.hstack([X, *(d.project(m.raw(d)) for m in others)])
+    parts = contributions(fit, val)
+    e_lib = val.y - (np.sum(parts, axis=0) if parts else 0.0)
+    result = []
+    for e, m in out:
+        if m.axis == "time":
+            sine, beta, _ = fit_axis_with(d, y, base, "time", freq_hz=m.freq_hz)
+            curves = np.hstack([val.project(c.raw(val)) for c in others])
+            e0 = e_lib - curves @ beta[X.shape[1]:]
+            held = held_out_test(e0, e0 - sine.force(val))
+            e = replace(e, held_out=held, confidence="moderate" if held.significant
+                        else "low")
+        result.append((e, m))
+    return result
+
+
+def _one_sinusoid(out: list[tuple[FoundEffect, AxisModel]], span: float,
+                  ) -> list[tuple[FoundEffect, AxisModel]]:
+    """The time and the frequency axis modelled by the same sinusoid (within one
+    frequency bin) are one finding: the better on held-out data is kept."""
+    sines = [(e, m) for e, m in out if m.axis == "time"]
+    if len(sines) < 2 or abs(sines[0][1].freq_hz - sines[1][1].freq_hz) > 1.0 / span:
+        return out
+
+    def score(item: tuple[FoundEffect, AxisModel]) -> float:
+        h = item[0].held_out
+        return -np.inf if h is None else h.reduction
+
+    drop = min(sines, key=score)
+    return [item for item in out if item is not drop]
 
 
 def _curve_evidence(axis: str, data: EquationData, y: FloatArray, X: FloatArray,
@@ -149,7 +205,8 @@ def _curve(kinds: tuple[str, ...], est: tuple[Fit, EquationData], val: EquationD
     X, fixed = design(fit.effects, d)
     best: tuple[float, AxisModel] | None = None
     for kind in kinds:
-        m, _, sse = fit_axis_with(d, d.y - fixed, X, kind, line, freq_hz, lean)
+        m, _, sse = fit_axis_with(d, d.y - fixed - remainder_of(fit, d), X, kind, line,
+                                  freq_hz, lean)
         if best is None or sse < best[0]:
             best = (sse, m)
     assert best is not None

@@ -26,7 +26,14 @@ from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
 from .kinematics import EquationData, thinned
-from .library import OVERSAMPLE, Effect, columns, dynamic_part
+from .library import (
+    INSTRUMENTED,
+    OVERSAMPLE,
+    Effect,
+    columns,
+    dynamic_part,
+    measured_columns,
+)
 from .stats import lstsq, whiten
 
 FloatArray = NDArray[np.float64]
@@ -125,13 +132,42 @@ def design(effects: tuple[Effect, ...], data: EquationData) -> tuple[FloatArray,
 
 
 def contributions(fit: Fit, data: EquationData) -> list[FloatArray]:
-    """Each effect's force on ``data`` (filtered, decimated) with the fitted parameters."""
+    """Each effect's force on ``data`` (filtered, decimated) with the fitted parameters,
+    made of the measured signals (:func:`.library.measured_columns`): what the corrected
+    plant takes out of the equation error."""
     out = []
     for e, s in zip(fit.effects, fit.slices(), strict=True):
         if e.dynamic:
-            out.append(dynamic_part(e, data))
+            out.append(measured_columns(e, data))
         else:
-            out.append(columns(e, data) @ fit.beta[s])
+            out.append(measured_columns(e, data) @ fit.beta[s])
+    return out
+
+
+def remainder_of(fit: Fit, data: EquationData, keep: tuple[int, ...] | None = None,
+                 ) -> FloatArray:
+    """:func:`remainder` of the fit's effects (those indexed by ``keep``) on ``data``."""
+    idx = range(len(fit.effects)) if keep is None else keep
+    slices = fit.slices()
+    effects = tuple(fit.effects[k] for k in idx)
+    beta = np.concatenate([fit.beta[slices[k]] for k in idx]) if effects else np.zeros(0)
+    return remainder(effects, beta, data)
+
+
+def remainder(effects: tuple[Effect, ...], beta: FloatArray,
+              data: EquationData) -> FloatArray:
+    """What the instruments leave of the effects' force: measured minus estimation columns
+    times the coefficients (zero for effects without instruments). ``y - fixed -
+    remainder`` regressed on :func:`design` leaves the corrected plant's equation error."""
+    out = np.zeros(data.n)
+    i = 0
+    for e in effects:
+        if e.dynamic:
+            out += measured_columns(e, data) - dynamic_part(e, data)
+        elif e.name in INSTRUMENTED:
+            b = beta[i:i + e.width]
+            out += (measured_columns(e, data) - columns(e, data)) @ b
+        i += 0 if e.dynamic else e.width
     return out
 
 

@@ -37,6 +37,8 @@ from .kinematics import EquationData, FilterSpec, choose_filter, kinematic_mode
 from .library import MIN_PERIODS, Effect, periods_seen
 from .modelling import Alternative, Model, confirmed_model
 from .parts import equation_data_parts
+from .profile import Profile, profiles, settle_friction
+from .reading import reading_gap, reading_noise
 from .select import ALPHA, MAX_EFFECTS, MIN_SHARE, Candidates, Step, forward_select, score_step
 from .stats import HeldOutTest, ar_whitener, lstsq, whiten
 from .translate import corrected_plant, effect_params
@@ -73,6 +75,8 @@ class Segments:
     """The contiguous parts of ``recs`` (one each, unless spans of a long recording)."""
     used: dict[str, Any] = field(default_factory=dict)
     """What part of the recordings was used (:meth:`.spans.Excerpt.describe`)."""
+    thrust_noise_n: float = 0.0
+    """The thrust reading's white noise (N rms, an upper bound: :mod:`.reading`)."""
 
     def pieces(self, name: str) -> tuple[Recording, ...]:
         """The contiguous parts of segment ``name`` (``estimation``, ``validation``)."""
@@ -162,9 +166,14 @@ def segments(plant: Plant, real: Recording | Excerpt, validate: Recording | Exce
     closed = fb > FEEDBACK_Z
     mode = kinematic_mode(est_parts, spec, closed)
     est = equation_data_parts(plant, est_parts, spec, mode, closed)
-    val = equation_data_parts(plant, parts["validation"], vspec, mode, closed)
-    full = equation_data_parts(plant, ex.parts, spec, mode, closed) if vex is None else None
-    return Segments(est, val, full, recs, fb, parts, used)
+    noise = reading_noise(est_parts, closed)
+    gap = reading_gap(noise, est)
+    if gap:
+        est = equation_data_parts(plant, est_parts, spec, mode, closed, gap)
+    val = equation_data_parts(plant, parts["validation"], vspec, mode, closed, gap)
+    full = equation_data_parts(plant, ex.parts, spec, mode, closed, gap) if vex is None \
+        else None
+    return Segments(est, val, full, recs, fb, parts, used, float(np.sqrt(noise)))
 
 
 @dataclass(frozen=True)
@@ -193,11 +202,15 @@ def fit_effects(plant: Plant, segs: Segments, opts: FitOptions | None = None) ->
     n_tests = sum(f.n_independent for f in cands.families)
     ranking = score_step(segs.est, cands, [], opts.alpha, opts.min_share)
     steps, _ = forward_select(segs.est, cands, opts.alpha, opts.min_share, opts.max_effects)
-    model, held, dropped = confirmed_model(tuple(s.effect for s in steps), segs.est,
-                                           segs.val, opts.alpha, opts.min_share)
+    chosen = settle_friction(tuple(s.effect for s in steps), segs.est, n_tests, opts.alpha,
+                             opts.min_share)
+    model, held, dropped = confirmed_model(chosen, segs.est, segs.val, opts.alpha,
+                                           opts.min_share)
     final, fdata = _final(model, segs)
     final, held = _prune(final, fdata, list(held), n_tests, opts.alpha)
-    found = _named(final, fdata, plant, held, model.alternatives, n_tests, opts.alpha)
+    final, profs = profiles(final, fdata)
+    found = _named(final, fdata, plant, held, model.alternatives, n_tests, opts.alpha,
+                   profs)
     return EffectsFit(segs, model, final, fdata, tuple(found), tuple(dropped),
                       tuple(ranking), n_tests)
 
@@ -253,9 +266,10 @@ def confidence(sig: float, held: HeldOutTest | None, alt: Alternative | None, al
 
 def _named(fit: Fit, data: EquationData, plant: Plant, held: list[Any],
            alts: dict[str, Alternative], n_tests: float, alpha: float,
-           ) -> list[FoundEffect]:
+           profs: dict[int, Profile] | None = None) -> list[FoundEffect]:
     sigs = drop_one(fit, data, n_tests)
     shares = _shares(fit, data)
+    tradeoff = any(not p.identified for p in (profs or {}).values())
     out = []
     for k, e in enumerate(fit.effects):
         params, std = effect_params(fit, k, plant)
@@ -272,9 +286,19 @@ def _named(fit: Fit, data: EquationData, plant: Plant, held: list[Any],
             notes.append(f"the travel covers {periods:.1f} periods of this pitch: no phase "
                          "of it is met twice, so a smooth curve over position (a local "
                          "force) explains it as well -- not identified as periodic")
+        prof = (profs or {}).get(k)
+        if prof is not None and not prof.identified:
+            notes.append(prof.note())
+        traded = e.name in ("coulomb_friction", "viscous_error") and tradeoff
+        if traded:
+            notes.append("its level trades off with the Stribeck hump, whose static force "
+                         "and velocity these data do not tell apart")
+        identified = periods >= MIN_PERIODS and (prof is None or prof.identified) \
+            and not traded
         out.append(FoundEffect(e.name, params, std, sigs[k], shares[k], held[k],
-                               confidence(sigs[k], held[k], alt, alpha,
-                                          periods >= MIN_PERIODS), tuple(notes), alt_d))
+                               confidence(sigs[k], held[k], alt, alpha, identified),
+                               tuple(notes), alt_d,
+                               None if prof is None else prof.to_dict()))
     return out
 
 

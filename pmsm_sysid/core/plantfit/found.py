@@ -30,6 +30,8 @@ class FoundEffect:
     confidence: str = "moderate"
     notes: tuple[str, ...] = ()
     alternative: dict[str, Any] | None = None
+    profile: dict[str, Any] | None = None
+    """Stribeck friction: the fit over its velocity (:mod:`.profile`)."""
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -43,6 +45,8 @@ class FoundEffect:
                                "confirmed": h.confirmed, "significant": h.significant}
         if self.alternative is not None:
             out["alternative"] = self.alternative
+        if self.profile is not None:
+            out["profile"] = self.profile
         if self.notes:
             out["notes"] = list(self.notes)
         return out

@@ -46,6 +46,11 @@ MAX_CYCLE_HZ_FACTOR = 1.0  # a position period must pass the filter at the media
 CHUNK = 32  # columns filtered at a time (memory)
 MAX_PITCHES = 400
 MIN_PERIODS = 2.0  # periods over the travel for a position-periodic force to be told apart
+#: Effects whose estimation columns are instruments (:func:`measured_columns`).
+INSTRUMENTED = ("mass_error", "viscous_error", "thrust_lag", "thrust_ripple")
+#: ... of which these are projected on the instruments after the parallel filter when
+#: the thrust reading is noisy (:meth:`.kinematics.EquationData.instrument`).
+FIRST_STAGE = ("mass_error", "viscous_error", "thrust_lag")
 
 
 @dataclass(frozen=True)
@@ -96,10 +101,10 @@ def raw_columns(e: Effect, data: EquationData) -> FloatArray:
         return data.friction()[:, None]
     if e.name == "stribeck_friction":
         return data.friction(e.velocity_mps)[:, None]
-    if e.name == "viscous_error":
-        return data.v_iv[:, None]
+    if e.name == "viscous_error":  # instruments: at full rate, or in :meth:`columns`
+        return (data.v_iv if data.inst is None else data.v_raw)[:, None]
     if e.name == "mass_error":
-        return data.a_iv[:, None]
+        return (data.a_iv if data.inst is None else data.a_raw)[:, None]
     if e.name == "spring":
         return x[:, None]
     if e.name == "cogging":
@@ -111,7 +116,7 @@ def raw_columns(e: Effect, data: EquationData) -> FloatArray:
         return np.column_stack(cols)
     if e.name == "thrust_ripple":
         k = 2.0 * math.pi / e.pitch_m
-        g = travel_gain(data.v, data.period, 1.0 / e.pitch_m, data.mode) * data.force
+        g = travel_gain(data.v, data.period, 1.0 / e.pitch_m, data.mode) * data.regressor_force
         return np.column_stack([g * np.sin(k * x), g * np.cos(k * x)])
     if e.name == "thrust_lag" and not e.dynamic:
         d = data.per_interval(lambda c: np.diff(c, prepend=c[0]), data.cmd) / data.period
@@ -123,12 +128,46 @@ def dynamic_part(e: Effect, data: EquationData) -> FloatArray:
     """Residual force of an exact lag/delay: nominal applied force minus the delayed one."""
     tau = max(e.tau_s, 0.0)
     delay = max(e.delay_s, 0.0)
-    return data.project(data.force - data.forced(tau, delay))
+    return data.instrument(data.project(data.force - data.forced(tau, delay)))
 
 
 def columns(e: Effect, data: EquationData) -> FloatArray:
     """Parallel-filtered regressor columns of ``e`` (n × width)."""
-    return data.project(raw_columns(e, data))
+    out = data.project(raw_columns(e, data))
+    return data.instrument(out) if e.name in FIRST_STAGE else out
+
+
+def measured_columns(e: Effect, data: EquationData) -> FloatArray:
+    """Filtered columns of ``e`` made of the signals as measured, under a noisy thrust
+    reading: the force the corrected plant takes out of the equation error.
+
+    Under a noisy reading the estimation columns (:func:`columns`, :func:`dynamic_part`)
+    of the mass, viscous, lag and ripple terms are projections on instruments made of the
+    thrust a gap away (:mod:`.instruments`): they give consistent coefficients, but such
+    an instrument holds only part of the effect's force (a third to two thirds under 5 N of
+    noise). The rest, ``(measured - instrumented) x coefficient``, belongs to the effect
+    too: left in the residual, another effect would take it (a 1 ms lag's remainder was
+    named Stribeck friction). With a clean reading (and under feedback) the instruments
+    hold nearly all of it, and the measured acceleration holds the speed sensor's noise
+    amplified by the mass: there the estimation columns are the effect's force.
+    """
+    if data.inst is None or not (e.dynamic or e.name in INSTRUMENTED):
+        return dynamic_part(e, data) if e.dynamic else columns(e, data)
+    if e.dynamic:
+        tau, delay = max(e.tau_s, 0.0), max(e.delay_s, 0.0)
+        return data.project(data.force - data.forced(tau, delay))
+    if e.name == "mass_error":
+        return data.project(data.a_raw[:, None])
+    if e.name == "viscous_error":
+        return data.project(data.v_raw[:, None])
+    if e.name == "thrust_lag":
+        d = data.per_interval(lambda c: np.diff(c, prepend=c[0]), data.cmd) / data.period
+        return data.project(data.pair(d)[:, None])
+    if e.name == "thrust_ripple":
+        k = 2.0 * math.pi / e.pitch_m
+        g = travel_gain(data.v, data.period, 1.0 / e.pitch_m, data.mode) * data.force
+        return data.project(np.column_stack([g * np.sin(k * data.x), g * np.cos(k * data.x)]))
+    return columns(e, data)
 
 
 @dataclass(frozen=True)
@@ -213,6 +252,8 @@ def family_chunks(fam: Family, data: EquationData) -> Iterator[tuple[int, FloatA
     for start, chunk in _chunks(fam.members, max(1, CHUNK // width)):
         raw = np.concatenate([raw_columns(e, data) for e in chunk], axis=1)
         proj = data.project(raw)
+        if fam.name in FIRST_STAGE:
+            proj = data.instrument(proj)
         yield start, proj.reshape(data.n, len(chunk), width).transpose(1, 0, 2)
 
 

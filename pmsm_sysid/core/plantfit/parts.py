@@ -43,7 +43,9 @@ def joined(datas: list[EquationData]) -> EquationData:
     values: dict[str, Any] = {}
     for f in fields(EquationData):
         got = [getattr(d, f.name) for d in datas]
-        if f.name in SHARED or not isinstance(got[0], np.ndarray):
+        if f.name == "inst" and got[0] is not None:  # one basis per part
+            values[f.name] = tuple(q for d in got for q in d)
+        elif f.name in SHARED or not isinstance(got[0], np.ndarray):
             values[f.name] = got[0]
         else:
             values[f.name] = np.concatenate(got)
@@ -54,11 +56,12 @@ def joined(datas: list[EquationData]) -> EquationData:
 
 
 def equation_data_parts(plant: Plant, rec: Parts, filt: FilterSpec | None = None,
-                        mode: str | None = None, closed_loop: bool = False) -> EquationData:
+                        mode: str | None = None, closed_loop: bool = False,
+                        thrust_gap: int = 0) -> EquationData:
     """:func:`.kinematics.equation_data` of a recording or of the parts of one (joined)."""
     parts = as_parts(rec)
     if len(parts) == 1:
-        return equation_data(plant, parts[0], filt, mode, closed_loop)
+        return equation_data(plant, parts[0], filt, mode, closed_loop, thrust_gap=thrust_gap)
     fs = parts[0].sample_rate_hz
     mode = mode or ("position" if parts[0].speed_derived else "speed")
     spec = filt or choose_filter([p.speed for p in parts], fs)
@@ -66,8 +69,8 @@ def equation_data_parts(plant: Plant, rec: Parts, filt: FilterSpec | None = None
     noise = smoothed_speed_noise(parts, mode, sos)
     ends = [np.concatenate(_interval_ends(p, mode, sos)) for p in parts]
     prior = SpeedPrior.from_speeds(np.concatenate(ends), noise, SIGN_SMOOTHING_MPS)
-    return joined([equation_data(plant, p, spec, mode, closed_loop, (noise, prior))
-                   for p in parts])
+    return joined([equation_data(plant, p, spec, mode, closed_loop, (noise, prior),
+                                 thrust_gap) for p in parts])
 
 
 __all__ = ["equation_data_parts", "joined"]

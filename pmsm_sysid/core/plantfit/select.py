@@ -20,8 +20,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from .estimate import remainder
 from .kinematics import EquationData, thinned
-from .library import Effect, Family, columns, families, family_chunks
+from .library import INSTRUMENTED, Effect, Family, columns, families, family_chunks
 from .stats import NestedTest, lstsq, nested_f_test
 
 FloatArray = NDArray[np.float64]
@@ -81,9 +82,12 @@ class Candidates:
 
 
 def _family_err(cands: Candidates, i: int, q: FloatArray, qy: FloatArray,
-                yy: float) -> FloatArray:
-    """ERR of every member of family ``i`` after the span of ``q`` (Gram updates only)."""
+                yy: float, y: FloatArray | None = None) -> FloatArray:
+    """ERR of every member of family ``i`` after the span of ``q`` (Gram updates only;
+    ``y``: a target other than the one the cache was built for)."""
     gram, rhs = cands.grams[i], cands.gys[i]
+    if y is not None:
+        rhs = np.einsum("knm,n->km", cands.cols[i], y.astype(np.float32)).astype(np.float64)
     if q.shape[1]:
         qg = np.einsum("nr,knm->krm", q.astype(np.float32), cands.cols[i]).astype(np.float64)
         gram = gram - np.einsum("krm,krp->kmp", qg, qg)
@@ -95,34 +99,48 @@ def _family_err(cands: Candidates, i: int, q: FloatArray, qy: FloatArray,
     return err
 
 
-def share_of(y: FloatArray, base: FloatArray, extra: FloatArray) -> float:
-    """Unwhitened ERR of ``extra`` after ``base``: its share of the mismatch energy."""
+def share_of(y: FloatArray, base: FloatArray, extra: FloatArray,
+             total: float | None = None) -> float:
+    """Unwhitened ERR of ``extra`` after ``base``: its share of the mismatch energy
+    (``total``, default that of ``y``)."""
     _, r0 = lstsq(base, y)
     _, r1 = lstsq(np.hstack([base, extra]), y)
-    return float(r0 @ r0 - r1 @ r1) / float(y @ y)
+    return float(r0 @ r0 - r1 @ r1) / (float(y @ y) if total is None else total)
+
+
+def left_after(chosen: list[Effect], data: EquationData) -> FloatArray:
+    """The mismatch with the instruments' remainder of the chosen effects taken out
+    (:func:`.estimate.remainder`): regressed on the chosen columns it leaves the
+    corrected plant's equation error, so a later candidate cannot take an effect's force
+    that its weak instrument missed."""
+    if data.inst is None or not any(e.name in INSTRUMENTED for e in chosen):
+        return data.y
+    beta, _ = lstsq(_stack(chosen, data), data.y)
+    out: FloatArray = data.y - remainder(tuple(chosen), beta, data)
+    return out
 
 
 def score_step(data: EquationData, cands: Candidates, chosen: list[Effect], alpha: float,
                min_share: float) -> list[Step]:
     """Score every remaining family once; return its best member's step, best ERR first."""
-    y = data.y
+    y = left_after(chosen, data)
     base = _stack(chosen, data)
     q = np.linalg.qr(base)[0] if base.shape[1] else np.zeros((len(y), 0))
     names = {e.name for e in chosen}
     n_tests = sum(f.n_independent for f in cands.families if f.name not in names)
     out = []
     qy = q.T @ y
-    yy = float(y @ y)
+    yy = float(data.y @ data.y)
     for i, fam in enumerate(cands.families):
         if fam.name in names:
             continue
-        errs = _family_err(cands, i, q, qy, yy)
+        errs = _family_err(cands, i, q, qy, yy, None if y is data.y else y)
         k = int(np.argmax(errs))
         err = float(errs[k])
         effect = fam.members[k]
         extra = columns(effect, data)
         test = nested_f_test(y, base, extra)
-        share = share_of(y, base, extra)
+        share = share_of(y, base, extra, yy)
         ok = test.corrected_log10_p(n_tests) < math.log10(alpha) and share >= min_share
         out.append(Step(effect, err, share, test, n_tests, ok))
     return sorted(out, key=lambda s: -s.err)
@@ -141,8 +159,8 @@ def forward_select(data: EquationData, cands: Candidates, alpha: float = ALPHA,
             return steps, scored
         step = passing[0]
         if step.effect.name == "cogging":
-            grown = grow_cogging(step.effect, data, _stack(chosen, data), data.y, alpha,
-                                 min_share)
+            grown = grow_cogging(step.effect, data, _stack(chosen, data),
+                                 left_after(chosen, data), alpha, min_share)
             step = replace(step, effect=grown)
         steps.append(step)
         chosen.append(step.effect)
