@@ -70,7 +70,10 @@ def test_emps_names_coulomb_friction_and_offset(shared_dir: Path, tmp_path: Path
     assert "force_offset.amplitude_n -3.1" in corrected_part
     assert " inf " not in text and "force_n" not in text
     if any(e["name"] == "unexplained" for e in d["effects"]):
-        assert "mm" in summary.split("unexplained:")[1].splitlines()[0]
+        lines = [part.splitlines()[0] for part in summary.split("unexplained:")[1:]]
+        over_position = [e for e in d["effects"] if e["name"] == "unexplained"
+                         and e["params"]["axis"] == "position"]
+        assert len([ln for ln in lines if " mm" in ln]) == len(over_position), lines
         assert "effect_unexplained" in page  # its curve drawn from the JSON
     where = d["mismatch"]["where"]
     assert sum(w["added_share"] for w in where if "added_share" in w) <= 1.0 + 1e-9

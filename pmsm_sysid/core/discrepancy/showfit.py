@@ -159,7 +159,7 @@ def _one_sinusoid(out: list[tuple[FoundEffect, AxisModel]], span: float,
                   ) -> list[tuple[FoundEffect, AxisModel]]:
     """The time and the frequency axis modelled by the same sinusoid (within one
     frequency bin) are one finding: the better on held-out data is kept."""
-    sines = [(e, m) for e, m in out if m.axis == "time"]
+    sines = [item for item in out if item[1].axis == "time"]
     if len(sines) < 2 or abs(sines[0][1].freq_hz - sines[1][1].freq_hz) > 1.0 / span:
         return out
 
