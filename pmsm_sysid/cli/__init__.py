@@ -45,7 +45,7 @@ ROS arguments: after the options above, --ros-args as for any ROS 2 executable, 
 def build_parser() -> argparse.ArgumentParser:
     from ..rosargs import ROS_VERBS
 
-    parser = _Parser(prog="pmsm-sysid", description=__doc__.split("\n\n")[0])
+    parser = _Parser(prog="pmsm-sysid", description=__doc__.split("\n\n")[0].replace("``", ""))
     sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=_Parser)
     sub.required = True
     for verb in VERBS:

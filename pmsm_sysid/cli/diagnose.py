@@ -58,9 +58,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-replay", action="store_true",
                    help="skip the short-horizon speed replay (output error)")
     p.add_argument("--max-samples", type=budget, default=None, metavar="N",
-                   help="samples used at most of each recording (default 120000); a longer "
-                        "one is used in ten spans spread evenly over it, and only those are "
-                        "read")
+                   help="samples used at most of each recording (default 120000, at least "
+                        "20000); a longer one is used in ten spans spread evenly over it, and "
+                        "only those are read")
     p.add_argument("--no-gfrf", action="store_true",
                    help="skip the GFRF comparison of the real data's NARX with a noisy "
                         "simulated twin's")
@@ -68,9 +68,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true",
                    help="no progress bar on the terminal (there is none when not a terminal)")
     p.add_argument("--corrected-plant", metavar="FILE",
-                   help="write the corrected plant (the nominal one with the effects "
-                        "found) as a YAML plant file; without it the corrected plant is in "
-                        "the JSON and the report only")
+                   help="write the corrected plant (the reference -- the plant file, or with "
+                        "--sim the simulator's fitted plant -- with the effects found and the "
+                        "changes applied) as a YAML plant file; without it the corrected plant "
+                        "is in the JSON and the report only")
     p.add_argument("--report", metavar="DIR", help="write figures (PNG) and DIR/index.html")
 
 

@@ -35,9 +35,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--min-share", type=parse_fraction, default=0.01,
                    help="smallest share of the force an effect must explain (default 0.01)")
     p.add_argument("--max-samples", type=budget, default=None, metavar="N",
-                   help="samples used at most of each recording (default 120000); a longer "
-                        "one is used in ten spans spread evenly over it, and only those are "
-                        "read")
+                   help="samples used at most of each recording (default 120000, at least "
+                        "20000); a longer one is used in ten spans spread evenly over it, and "
+                        "only those are read")
     p.add_argument("--json", metavar="FILE",
                    help="write the plant, its standard errors, effects and fit as JSON "
                         "('-' = stdout)")

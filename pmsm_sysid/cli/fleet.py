@@ -65,9 +65,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--min-share", type=parse_fraction, default=0.01,
                    help="smallest share of the mismatch an effect must explain (default 0.01)")
     p.add_argument("--max-samples", type=budget, default=120_000, metavar="N",
-                   help="samples used at most of each recording (default 120000); a longer "
-                        "one is used in ten spans spread evenly over it, and only those are "
-                        "read")
+                   help="samples used at most of each recording (default 120000, at least "
+                        "20000); a longer one is used in ten spans spread evenly over it, and "
+                        "only those are read")
     p.add_argument("--baseline", type=count(3, 10_000), default=8, metavar="N",
                    help="an axis's first N recordings are its baseline (default 8)")
     p.add_argument("--band", type=number(0, 100, low_open=True), default=4.0, metavar="Z",

@@ -36,7 +36,7 @@ from ..recording.spans import Excerpt
 from .nonparam import AxisModel
 from .rival import AXIS_EFFECTS, Rival, as_found, rivals
 from .showfit import scan_unexplained
-from .words import used_lines
+from .words import unexplained_text, used_lines
 
 RIGID_NAMES = ("mass_error", "viscous_error")
 
@@ -83,8 +83,9 @@ class PlantFitResult:
                  f"{s['viscous_n_per_mps']:.2g}"]
         if not self.effects:
             lines.append("  no library effect beyond the mass and viscous damping")
-        for e in self.effects:
-            lines.append(effect_line(e))
+        for e in self.effects:  # an unexplained force in words, as diagnose says it
+            lines.append(effect_line(e, unexplained_text(e.params)
+                                     if e.name == "unexplained" else None))
             lines += [f"    note: {n}" for n in e.notes]
         for seg in ("estimation", "validation"):
             f = self.fit.get(seg)
