@@ -20,6 +20,7 @@ from plant_cases import SIM_MASS, SIM_VISCOUS, closed_loop, open_loop, plant
 import pmsm_sysid as ps
 from pmsm_sysid.bagio import write_recording
 from pmsm_sysid.cli import main
+from pmsm_sysid.core.discrepancy.words import unexplained_text
 from pmsm_sysid.core.physics.plant import Cogging, CoulombFriction, load_plant
 
 M_REF, FV_REF, FC_REF, OFFSET_REF = 95.1089, 203.5034, 20.3935, -3.1648
@@ -52,6 +53,12 @@ def test_emps_plant_is_the_idim_reference(shared_dir: Path, tmp_path: Path,
         assert names[name]["held_out"]["confirmed"] and names[name]["significance"] > 10
     assert d["method"]["feedback"]["closed_loop"]
     assert d["fit"]["validation"]["nrmse_after"] < 0.2 * d["fit"]["validation"]["nrmse_before"]
+    # an unexplained force is said in words, as diagnose says it (no raw parameter dump)
+    left = [e for e in d["effects"] if e["name"] == "unexplained"]
+    assert left, "EMPS leaves position-dependent friction no library effect names"
+    for e in left:
+        assert f"unexplained: {unexplained_text(e['params'])}" in text
+    assert "axis=" not in text and "line_local_share" not in text
 
 
 @pytest.mark.slow
