@@ -42,7 +42,7 @@ from ..recording.spans import Excerpt
 from .gfrf_compare import gfrf_where
 from .nonparam import AxisModel
 from .result import Curves, DiagnoseResult
-from .rival import AXIS_EFFECTS, Rival, as_found, rivals
+from .rival import as_found, cap_beside_curves, rivals
 from .showfit import beside_curves, fit_table, replay_notes, scan_unexplained, where_table
 
 _CLOSED_NOTE = ("the thrust responds to sensor noise (closed loop): thrust_lag and "
@@ -93,7 +93,7 @@ def _diagnose(plant: Plant, real: Recording | Excerpt, validate: Recording | Exc
                               (model.fit, segs.est), segs.val, closed)
     rv = rivals(model.fit, segs.est, segs.val, not closed, opts.alpha)
     curves = beside_curves(curves, [r.model for r in rv], (model.fit, segs.est), segs.val)
-    found = _cap(list(ef.found), curves, rv)
+    found, _ = cap_beside_curves(ef.found, curves, rv)
     beaten = {r.axis for r in rv}
     unconfirmed = [e for e, _ in curves if e.held_out is not None and not e.held_out.confirmed]
     curves = [(e, m) for e, m in curves if e.held_out is None or e.held_out.confirmed]
@@ -143,24 +143,6 @@ def cap_on_replay(found: list[FoundEffect], table: dict[str, Any],
     note = (f"{', '.join(lowered)}: confidence lowered to moderate -- the held-out "
             "recording replays worse with the correction" if lowered else "")
     return out, [note] if note else []
-
-
-def _cap(found: list[FoundEffect], curves: list[tuple[FoundEffect, AxisModel]],
-         rv: list[Rival]) -> list[FoundEffect]:
-    """No 'high' for a library effect when a curve confirmed on held-out data explains
-    what is left on its axis, or explains it better than the effect: the library was not
-    the best explanation there."""
-    axes = {m.axis for e, m in curves if e.held_out is not None and e.held_out.significant}
-    near = {n for a in axes for n in AXIS_EFFECTS.get(a, ())}
-    near |= {n for r in rv for n in r.replaced}
-    out = []
-    for e in found:
-        if e.name in near and e.confidence == "high":
-            e = replace(e, confidence="moderate", notes=(*e.notes, (
-                "an unexplained force remains on its axis and a curve explains held-out "
-                "data better than this effect alone: it is part of the story at most")))
-        out.append(e)
-    return out
 
 
 def _best_curve(curves: list[tuple[FoundEffect, AxisModel]]) -> AxisModel | None:

@@ -34,7 +34,7 @@ from ..plantfit.stats import nrmse
 from ..recording.signals import Recording
 from ..recording.spans import Excerpt
 from .nonparam import AxisModel
-from .rival import AXIS_EFFECTS, Rival, as_found, rivals
+from .rival import as_found, cap_beside_curves, rivals
 from .showfit import scan_unexplained
 from .words import unexplained_text, used_lines
 
@@ -109,7 +109,7 @@ def fit_plant(rec: Recording | Excerpt, validate: Recording | Excerpt | None = N
         raise
     except (ValueError, np.linalg.LinAlgError) as exc:
         raise DiagnoseError(f"fitting a plant failed on these data: {exc}") from exc
-    found, near = capped(pf.found, curves, rv)
+    found, near = cap_beside_curves(pf.found, curves, rv)
     beaten = {r.axis for r in rv}
     curves = [(e, m) for e, m in curves if e.params.get("axis") not in beaten]
     curves += [(as_found(r), r.model) for r in rv]
@@ -140,24 +140,6 @@ def leftover(pf: PhysicalFit, opts: FitOptions) -> list[tuple[FoundEffect, AxisM
     return [(e, m) for e, m in curves if e.held_out is None or (
         e.held_out.significant if m.axis == "thrust" and not pf.setup.closed
         else e.held_out.confirmed)]
-
-
-def capped(found: tuple[FoundEffect, ...], curves: list[tuple[FoundEffect, AxisModel]],
-           rv: list[Rival]) -> tuple[list[FoundEffect], set[str]]:
-    """No 'high' for an effect on an axis where a curve confirmed on held-out data explains
-    what is left, or predicts the held-out data better than the effects there (as
-    ``diagnose``); returns the effects and every library name so capped."""
-    axes = {m.axis for e, m in curves if e.held_out is not None and e.held_out.significant}
-    near = {n for a in axes for n in AXIS_EFFECTS.get(a, ())}
-    near |= {n for r in rv for n in r.replaced}
-    out = []
-    for e in found:
-        if e.name in near and e.confidence == "high":
-            e = replace(e, confidence="moderate", notes=(*e.notes, (
-                "an unexplained force remains on its axis and a curve explains held-out "
-                "data better than this effect alone: it is part of the story at most")))
-        out.append(e)
-    return out, near
 
 
 def fit_rows(pf: PhysicalFit) -> dict[str, Any]:
@@ -196,4 +178,4 @@ def method(pf: PhysicalFit, opts: FitOptions, has_validate: bool) -> dict[str, A
     }
 
 
-__all__ = ["PlantFitResult", "capped", "fit_plant", "fit_rows", "leftover", "method"]
+__all__ = ["PlantFitResult", "fit_plant", "fit_rows", "leftover", "method"]

@@ -16,7 +16,7 @@ significantly better than the curve to keep the axis.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -111,3 +111,23 @@ def as_found(r: Rival) -> FoundEffect:
         r.held, "moderate" if r.held.significant else "low",
         (f"a curve over {r.axis} predicts held-out data better than "
          f"{', '.join(r.replaced)} (held-out MSE -{r.held.reduction:.0%}, z={r.held.z:.1f})",))
+
+
+def cap_beside_curves(found: list[FoundEffect] | tuple[FoundEffect, ...],
+                      curves: list[tuple[FoundEffect, AxisModel]],
+                      rv: list[Rival]) -> tuple[list[FoundEffect], set[str]]:
+    """No 'high' for a library effect when a curve confirmed on held-out data explains what
+    is left on its axis, or a rival curve explains it better than the effect: the library
+    was not the best explanation there. Returns the effects and every library name so
+    capped (``diagnose`` and ``fit-plant`` alike)."""
+    axes = {m.axis for e, m in curves if e.held_out is not None and e.held_out.significant}
+    near = {n for a in axes for n in AXIS_EFFECTS.get(a, ())}
+    near |= {n for r in rv for n in r.replaced}
+    out = []
+    for e in found:
+        if e.name in near and e.confidence == "high":
+            e = replace(e, confidence="moderate", notes=(*e.notes, (
+                "an unexplained force remains on its axis and a curve explains held-out "
+                "data better than this effect alone: it is part of the story at most")))
+        out.append(e)
+    return out, near
