@@ -20,7 +20,9 @@ setup(
     install_requires=["numpy", "scipy", "rosbags>=0.10", "PyYAML", "jsonschema", "matplotlib",
                       "Jinja2", "rich"],
     extras_require={
-        "test": ["pytest", "pytest-xdist", "pytest-timeout", "hypothesis", "ruff", "mypy",
+        # pytest 9.2 ignores the test-group suffix pytest-xdist 3.8 gives a test, so
+        # `--dist loadgroup` would split a module's shared runs over both test processes
+        "test": ["pytest<9.2", "pytest-xdist", "pytest-timeout", "hypothesis", "ruff", "mypy",
                  "types-PyYAML", "scipy-stubs", "pdoc", "colcon-core", "colcon-ros",
                  "colcon-python-setup-py", "dask[distributed]", "pyarrow"],
         # `pmsm-sysid fleet` / ps.fleet: many recordings in parallel on Dask distributed (a

@@ -58,6 +58,9 @@ sys.meta_path.insert(0, _WithoutRos())
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 
 
+UNGROUPED = pytest.StashKey[bool]()
+
+
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--without-ros", action="store_true",
                      help="run as without ROS: deselect the 'ros' tests; rclpy and the ROS "
@@ -102,10 +105,18 @@ def _block_ros() -> None:
     os.environ["PMSM_SYSID_WITHOUT_ROS"] = str(site)
 
 
+@pytest.hookimpl(trylast=True)  # after pytest-xdist has named each test's group
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Modules with ``slow`` tests first, each module's tests kept together (module fixtures
     are made once) and in order, so that the two test processes get the long tests early
-    and finish together; with ``--without-ros``, the ``ros`` tests are deselected."""
+    and finish together; with ``--without-ros``, the ``ros`` tests are deselected. Under
+    ``--dist loadgroup`` a test of an ``xdist_group`` that did not get its group (a pytest
+    that pytest-xdist cannot group with) fails: the group's shared runs would be made once
+    in each test process."""
+    if getattr(config.option, "loadgroup", False):
+        for item in items:
+            if item.get_closest_marker("xdist_group") and "@" not in item.nodeid:
+                item.stash[UNGROUPED] = True
     if config.getoption("--without-ros"):
         ros = [item for item in items if item.get_closest_marker("ros")]
         if ros:
@@ -138,6 +149,14 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
             "worker": os.environ.get("PYTEST_XDIST_WORKER", "main")}
     with open(target, "a", encoding="utf-8") as out:
         out.write(json.dumps(line) + "\n")
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """A test that ``--dist loadgroup`` left without its group fails."""
+    if item.stash.get(UNGROUPED, False):
+        pytest.fail(f"--dist loadgroup did not put this test in its group (pytest "
+                    f"{pytest.__version__} with this pytest-xdist; install requirements.lock)",
+                    pytrace=False)
 
 
 @pytest.fixture(scope="session")
