@@ -373,16 +373,31 @@ def test_a_long_recording_is_used_in_the_spans_fit_plant_and_diagnose_use(
     assert row["diagnosed"] == [e["name"] for e in found["effects"]] == ["coulomb_friction"]
 
 
-def test_the_local_clusters_workers_run_without_the_statistical_profiler() -> None:
-    """Dask's profiler samples every thread's stack each 10 ms; the fleet's local workers
-    have it off (it cost about a fifth of a worker's CPU time on fleet rows)."""
+def _worker_settings() -> tuple[bool, str | None, str | None]:
+    import os
+
+    import dask
+
+    return (dask.config.get("distributed.worker.profile.enabled"),
+            os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("OPENBLAS_NUM_THREADS"))
+
+
+def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_threshold() -> None:
+    """Dask's profiler samples every thread's stack each 10 ms, and the glibc trim threshold
+    Dask's nannies set maps every array over 128 kB anew; the fleet's local workers have
+    neither (they cost about a fifth of a worker's CPU time each on fleet rows), and keep
+    one BLAS thread."""
     import dask
     import dask.distributed  # loads Dask distributed's settings
 
     from pmsm_sysid.batch.cluster import local_cluster
 
-    assert dask.config.get("distributed.worker.profile.enabled") is True  # Dask's default
+    def defaults() -> tuple[object, object]:
+        return (dask.config.get("distributed.worker.profile.enabled"),
+                dask.config.get("distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"))
+
+    assert defaults() == (True, 65536)  # Dask's defaults
     with local_cluster(1) as client:
-        flags = client.run(lambda: dask.config.get("distributed.worker.profile.enabled"))
-    assert list(flags.values()) == [False]
-    assert dask.config.get("distributed.worker.profile.enabled") is True  # left as it was
+        got = client.run(_worker_settings)
+    assert list(got.values()) == [(False, None, "1")]
+    assert defaults() == (True, 65536)  # left as they were

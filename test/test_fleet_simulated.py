@@ -56,10 +56,15 @@ def bags(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def client() -> Iterator[Any]:
+    import dask
     from dask.distributed import Client, LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      dashboard_address=":0") as cluster, Client(cluster) as c:
+    from pmsm_sysid.batch.cluster import WORKER_CONFIG
+
+    # a caller's cluster with the worker settings docs/fleet.md recommends
+    with dask.config.set(WORKER_CONFIG), LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True,
+            dashboard_address=":0") as cluster, Client(cluster) as c:
         yield c
 
 

@@ -27,11 +27,11 @@ EXTRA = "pip install '.[fleet]' (in the pmsm_sysid source directory)"
 #: a worker's CPU time. And the environment the nanny gives its worker without Dask's
 #: ``MALLOC_TRIM_THRESHOLD_``: that setting fixes glibc's mmap threshold, so every array of
 #: more than 128 kB is mapped and unmapped anew (ten times the page faults; a row's system
-#: time 0.04 -> 0.36 s). One BLAS thread per worker, as Dask's default has it.
+#: time 0.04 -> 0.36 s); None unsets it. A cluster of your own takes the same settings from
+#: its workers' Dask configuration (docs/fleet.md).
 WORKER_CONFIG = {
     "distributed.worker.profile.enabled": False,
-    "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1,
-                                            "OPENBLAS_NUM_THREADS": 1},
+    "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
 }
 #: How long a scheduler address may take to answer, and workers to show up (s).
 CONNECT_TIMEOUT_S = 5.0
