@@ -47,6 +47,26 @@ def test_expected_sign_under_a_dwelling_speed_matches_monte_carlo() -> None:
     assert flat - mc2 > 0.3  # the flat prior is the wrong calibration here
 
 
+def test_a_prior_is_deconvolved_once_per_speed_record_and_shared_read_only() -> None:
+    """A fit builds the equation data of one recording for each plant it tries: the prior of
+    the same speeds (same bytes, noise and base) is the same object, computed once; other
+    speeds, another noise or another base give their own; nobody can change a shared one."""
+    rng = np.random.default_rng(2)
+    v = rng.uniform(-0.1, 0.1, 4000)
+    first = SpeedPrior.from_speeds(v, 0.002, BASE)
+    assert SpeedPrior.from_speeds(v.copy(), 0.002, BASE) is first
+    fresh = SpeedPrior._deconvolved(v, 0.002, BASE)  # what the cache holds, computed anew
+    for name in ("grid", "density", "kernel"):
+        assert np.array_equal(getattr(first, name), getattr(fresh, name))
+    w = v.copy()
+    w[17] += 1e-9
+    assert SpeedPrior.from_speeds(w, 0.002, BASE) is not first
+    assert SpeedPrior.from_speeds(v, 0.003, BASE) is not first
+    assert SpeedPrior.from_speeds(v, 0.002, 2 * BASE) is not first
+    with pytest.raises(ValueError):
+        first.density[0] = 1.0
+
+
 def test_without_noise_the_calibration_is_the_function_itself() -> None:
     rng = np.random.default_rng(1)
     v = rng.uniform(-0.2, 0.2, 5000)

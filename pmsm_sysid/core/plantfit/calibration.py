@@ -22,7 +22,10 @@ equation instant comes from its antiderivative, as in :func:`.averaging.interval
 
 from __future__ import annotations
 
+import hashlib
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +36,7 @@ FloatArray = NDArray[np.float64]
 RL_ITERATIONS = 50
 POINTS_PER_WIDTH = 5  # grid points per noise width (or per quarter of the sign's width)
 FLAT_FLOOR = 1e-6  # of the prior's peak: where the data have no speeds, a flat prior
+CACHED_PRIORS = 16  # priors kept for the speed records seen last (SpeedPrior.from_speeds)
 
 
 @dataclass(frozen=True)
@@ -46,8 +50,28 @@ class SpeedPrior:
     @classmethod
     def from_speeds(cls, speeds: FloatArray, sigma: float, base: float) -> SpeedPrior:
         """Prior of the true speed behind ``speeds`` measured with noise ``sigma`` (m/s);
-        ``base`` is the narrowest width a friction function has (the sign's smoothing)."""
-        v = np.asarray(speeds, dtype=np.float64)
+        ``base`` is the narrowest width a friction function has (the sign's smoothing).
+
+        A fit builds the equation data of one recording for each plant it tries, with the
+        same speeds each time: the priors of the last few speed records are kept (keyed by
+        their bytes), so the deconvolution runs once per recording."""
+        v = np.ascontiguousarray(speeds, dtype=np.float64)
+        key = (hashlib.blake2b(v.tobytes(), digest_size=16).digest(), v.shape, float(sigma),
+               float(base))
+        with _LOCK:
+            hit = _PRIORS.get(key)
+            if hit is not None:
+                _PRIORS.move_to_end(key)
+                return hit
+        prior = cls._deconvolved(v, sigma, base)
+        with _LOCK:
+            _PRIORS[key] = prior
+            while len(_PRIORS) > CACHED_PRIORS:
+                _PRIORS.popitem(last=False)
+        return prior
+
+    @classmethod
+    def _deconvolved(cls, v: FloatArray, sigma: float, base: float) -> SpeedPrior:
         h = max(sigma, 0.25 * base) / POINTS_PER_WIDTH
         half = math.ceil(4.0 * sigma / h)
         kernel = np.exp(-0.5 * (np.arange(-half, half + 1) * h / max(sigma, 1e-12)) ** 2)
@@ -62,7 +86,10 @@ class SpeedPrior:
         for _ in range(RL_ITERATIONS if half > 0 else 0):
             blurred = np.convolve(p, kernel, mode="same")
             p = p * np.convolve(hist / np.maximum(blurred, 1e-300), kernel[::-1], mode="same")
-        return cls(grid, p / float(p.sum()), kernel)
+        density = p / float(p.sum())
+        for a in (grid, density, kernel):
+            a.flags.writeable = False  # shared by every fit of the same speeds
+        return cls(grid, density, kernel)
 
     def expected(self, values: FloatArray) -> FloatArray:
         """E[f(v) | v̂] on the grid, for ``values`` = f on the grid."""
@@ -103,3 +130,7 @@ def calibrated_friction(prior: SpeedPrior, v_lo: FloatArray, v_hi: FloatArray,
     """Interval mean of E[sign(v) (hump)] given the smoothed speed (module doc)."""
     return prior.interval_mean(friction_values(prior.grid, smoothing, stribeck_mps),
                                v_lo, v_hi)
+
+
+_PRIORS: OrderedDict[tuple[bytes, tuple[int, ...], float, float], SpeedPrior] = OrderedDict()
+_LOCK = threading.Lock()
