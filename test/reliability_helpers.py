@@ -1,4 +1,4 @@
-"""Shared pieces of the reliability tests: the console script, one-line error checks, and
+"""Shared pieces of the reliability tests: the command line (in process), one-line error checks, and
 bags written message by message (receive time and header stamp chosen independently, as a
 real recorder sees them)."""
 
@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 import warnings
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from cli_inprocess import invoke
 from narx_systems import QUADRATIC, simulate, white_input
 from rosbags.rosbag2 import Writer
 
@@ -22,18 +22,15 @@ from pmsm_sysid.bagio.cdr import encode_stamped
 from pmsm_sysid.cli import main
 from pmsm_sysid.core.recording.signals import Recording
 
-EXE = Path(sys.executable).with_name("pmsm-sysid")
 FS = 500.0
 PERIOD_NS = 2_000_000
 SIGNALS = ("thrust", "speed", "position")
 SMALL = ["--ny", "2", "--nu", "2", "--terms", "5"]  # the known system's structure
 
 
-def run_cli(*args: str, env: dict[str, str] | None = None,
-            timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    """``pmsm-sysid ARGS`` as a separate process (the console script users type)."""
-    return subprocess.run([str(EXE), *args], capture_output=True, text=True, timeout=timeout,
-                          env=env, check=False)
+def run_cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    """``pmsm-sysid ARGS`` of an offline verb, in this process (:mod:`cli_inprocess`)."""
+    return invoke(*args, env=env)
 
 
 def assert_one_line_error(proc: subprocess.CompletedProcess[str], *fragments: str) -> str:

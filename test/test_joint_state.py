@@ -13,12 +13,12 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from cli_inprocess import invoke
 from replay_helpers import assert_live_equals_offline, replay_into_pipeline, write_joint_state_bag
 
 from pmsm_sysid.core.physics.excitation import make_excitation
@@ -100,8 +100,8 @@ def test_namespaced_robot_is_one_remap_away_and_recorded(ros_env: int, tmp_path:
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", *args], capture_output=True,
-                          text=True, timeout=600)
+    """``pmsm-sysid ARGS`` of an offline verb, in this process (:mod:`cli_inprocess`)."""
+    return invoke(*args)
 
 
 @pytest.mark.slow

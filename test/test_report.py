@@ -12,7 +12,6 @@ import os
 import re
 import struct
 import subprocess
-import sys
 import zlib
 from html.parser import HTMLParser
 from pathlib import Path
@@ -20,13 +19,14 @@ from typing import Any
 
 import numpy as np
 import pytest
+from cli_inprocess import invoke
 
 from pmsm_sysid import plots
 from pmsm_sysid.report import ReportResult, build_report
 
 REPO = Path(__file__).resolve().parents[1]
 BAG = REPO / "bags" / "paper_speed_nominal"
-CLI = [sys.executable, "-m", "pmsm_sysid.cli"]
+
 FIGURES = {"io_estimation", "psd", "predicted_estimation", "predicted_validation",
            "correlation_tests", "h1", "h2_contour", "h2_surface", "h3_slice"}
 GFRF_FIGURES = {"h1", "h2_contour", "h2_surface", "h3_slice"}
@@ -42,8 +42,8 @@ def bundled_bag() -> Path:
 
 
 def cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=300,
-                          cwd=REPO, env={**os.environ, **(env or {})})
+    """``pmsm-sysid ARGS`` in this process (:mod:`cli_inprocess`), from the repository."""
+    return invoke(*args, cwd=REPO, env={**os.environ, **(env or {})})
 
 
 class _Refs(HTMLParser):

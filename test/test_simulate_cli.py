@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_inprocess import invoke
 
 from pmsm_sysid.bagio import read_recording
 from pmsm_sysid.cli import main
@@ -19,13 +18,11 @@ from pmsm_sysid.core.physics.motor import simulate
 from pmsm_sysid.core.physics.plant import load_plant
 
 REPO = Path(__file__).resolve().parents[1]
-CLI = str(Path(sys.executable).parent / "pmsm-sysid")
 
 
 def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    return subprocess.run([CLI, *args], capture_output=True, text=True, timeout=120, env=env,
-                          cwd=cwd)
+    """``pmsm-sysid ARGS`` in this process (:mod:`cli_inprocess`)."""
+    return invoke(*args, cwd=cwd)
 
 
 def assert_one_line_error(proc: subprocess.CompletedProcess[str], fragment: str) -> None:

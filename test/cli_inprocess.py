@@ -1,0 +1,56 @@
+"""``pmsm-sysid ARGS`` of an offline verb in the test process: what the console script does
+(``pmsm_sysid.cli.main``: its exit status, stdout and stderr), without starting a Python
+and importing numpy, scipy and matplotlib again for every call (about 1.2 s of CPU each).
+
+Only for the offline verbs (no ROS, no signals, no processes of their own); the console
+scripts themselves are run as processes in test_install.py, and the ROS verbs, the fleet
+and every signal or kill test stay separate processes.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import subprocess
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager, redirect_stderr, redirect_stdout
+from pathlib import Path
+
+from pmsm_sysid.cli import main
+
+OFFLINE = ("simulate", "identify", "gfrf", "diagnose", "fit-plant", "report", "import-mat")
+
+
+@contextmanager
+def _environment(env: Mapping[str, str] | None, cwd: Path | str | None) -> Iterator[None]:
+    """``env`` as the whole environment and ``cwd`` as the working directory, for the
+    call only (as ``subprocess.run(env=, cwd=)`` would give the process)."""
+    saved, here = dict(os.environ), os.getcwd()
+    try:
+        if env is not None:
+            os.environ.clear()
+            os.environ.update(env)
+        if cwd is not None:
+            os.chdir(cwd)
+        yield
+    finally:
+        os.chdir(here)
+        os.environ.clear()
+        os.environ.update(saved)
+
+
+def invoke(*args: str, env: Mapping[str, str] | None = None,
+           cwd: Path | str | None = None) -> subprocess.CompletedProcess[str]:
+    """Run ``pmsm-sysid ARGS`` (an offline verb) here; the result as ``subprocess.run``
+    gives it (``returncode``, ``stdout``, ``stderr``). An exception that escapes ``main``
+    (a traceback in a process) fails the calling test."""
+    verb = next((a for a in args if not a.startswith("-")), "")
+    assert verb in OFFLINE, f"{verb!r} is not an offline verb: run it as a process"
+    out, err = io.StringIO(), io.StringIO()
+    with _environment(env, cwd), redirect_stdout(out), redirect_stderr(err):
+        try:
+            code = main(list(args))
+        except SystemExit as exc:  # argparse: usage errors and --help
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    return subprocess.CompletedProcess(["pmsm-sysid", *args], code, out.getvalue(),
+                                       err.getvalue())
