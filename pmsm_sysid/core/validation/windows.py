@@ -18,6 +18,11 @@ from __future__ import annotations
 
 from typing import Any
 
+# scipy.stats at import, not at the first call: the identifier node judges its windows on
+# its executor thread, where a first import (half a second, more on a busy machine) would
+# hold up the intake long enough to skip a window
+from scipy import stats
+
 __all__ = ["LEVEL", "NULL_RATE", "window_rate"]
 
 #: Share of windows whose cross-validation a correct model may fail (module doc).
@@ -36,9 +41,6 @@ def window_rate(passed: int, made: int) -> dict[str, Any]:
     >>> round(window_rate(10, 12)["p_value"], 2), window_rate(40, 52)["consistent"]
     (0.12, False)
     """
-    from scipy import stats  # here: importing scipy.stats costs about half a second, and
-    # the live nodes' own process imports this module but judges runs only at their end
-
     failed = made - passed
     p_value = float(stats.binom.sf(failed - 1, made, NULL_RATE)) if made and failed > 0 else 1.0
     return {"passed": passed, "windows": made, "failed": failed, "null_rate": NULL_RATE,
