@@ -12,6 +12,8 @@ from __future__ import annotations
 import io
 import os
 import subprocess
+import sys
+import warnings
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager, redirect_stderr, redirect_stdout
 from pathlib import Path
@@ -39,15 +41,37 @@ def _environment(env: Mapping[str, str] | None, cwd: Path | str | None) -> Itera
         os.environ.update(saved)
 
 
+@contextmanager
+def _warnings_as_a_process() -> Iterator[None]:
+    """Warnings filtered as a fresh interpreter filters them and printed on ``sys.stderr``
+    (pytest otherwise records them out of sight, and each is shown once per place
+    per test process, not per call): an extra line a process would print is seen."""
+    def show(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+             file: object = None, line: str | None = None) -> None:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+    with warnings.catch_warnings():  # also forgets which warnings were shown before
+        warnings.resetwarnings()
+        warnings.simplefilter("default")
+        for category in (ResourceWarning, ImportWarning, PendingDeprecationWarning,
+                         DeprecationWarning):
+            warnings.filterwarnings("ignore", category=category)
+        warnings.filterwarnings("default", category=DeprecationWarning, module="__main__")
+        warnings.showwarning = show
+        yield
+
+
 def invoke(*args: str, env: Mapping[str, str] | None = None,
            cwd: Path | str | None = None) -> subprocess.CompletedProcess[str]:
     """Run ``pmsm-sysid ARGS`` (an offline verb) here; the result as ``subprocess.run``
-    gives it (``returncode``, ``stdout``, ``stderr``). An exception that escapes ``main``
-    (a traceback in a process) fails the calling test."""
+    gives it (``returncode``, ``stdout``, ``stderr``, warnings printed on it as a process
+    prints them). An exception that escapes ``main`` (a traceback in a process) fails the
+    calling test."""
     verb = next((a for a in args if not a.startswith("-")), "")
     assert verb in OFFLINE, f"{verb!r} is not an offline verb: run it as a process"
     out, err = io.StringIO(), io.StringIO()
-    with _environment(env, cwd), redirect_stdout(out), redirect_stderr(err):
+    with _environment(env, cwd), redirect_stdout(out), redirect_stderr(err), \
+            _warnings_as_a_process():
         try:
             code = main(list(args))
         except SystemExit as exc:  # argparse: usage errors and --help

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -99,11 +98,6 @@ def test_namespaced_robot_is_one_remap_away_and_recorded(ros_env: int, tmp_path:
     assert s["recorded_by_topic"] == counts
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess[str]:
-    """``pmsm-sysid ARGS`` of an offline verb, in this process (:mod:`cli_inprocess`)."""
-    return invoke(*args)
-
-
 @pytest.mark.slow
 def test_identify_and_diagnose_read_the_robots_bag(tmp_path: Path) -> None:
     """The offline verbs find the JointState layout by themselves; among several joints
@@ -118,14 +112,14 @@ def test_identify_and_diagnose_read_the_robots_bag(tmp_path: Path) -> None:
     topics = tmp_path / "topics"
     write_recording(topics, rec)
 
-    several = _cli("identify", str(robot))
+    several = invoke("identify", str(robot))
     assert several.returncode == 2 and several.stderr.count("\n") == 1
     assert "carries joints axis, gripper, wrist" in several.stderr
     assert "--joint axis" in several.stderr
 
     small = {"ny": 4, "nu": 4, "terms": 6, "validate": (1500, 2500)}
     out = tmp_path / "robot.json"
-    proc = _cli("identify", str(robot), "--joint", "axis", "--ny", "4", "--nu", "4",
+    proc = invoke("identify", str(robot), "--joint", "axis", "--ny", "4", "--nu", "4",
                 "--terms", "6", "--validate", "1500:2500", "--json", str(out))
     assert proc.returncode == 0, proc.stderr
     fits = {"robot": json.loads(out.read_text()),
@@ -143,7 +137,7 @@ def test_identify_and_diagnose_read_the_robots_bag(tmp_path: Path) -> None:
         ps.read_bag(robot, joint="elbow")
 
     out = tmp_path / "diag.json"
-    proc = _cli("diagnose", "--plant", "drive", "--real", str(robot), "--joint", "axis",
+    proc = invoke("diagnose", "--plant", "drive", "--real", str(robot), "--joint", "axis",
                 "--no-replay", "--no-gfrf", "--json", str(out))
     assert proc.returncode == 0, proc.stderr
     found = json.loads(out.read_text())

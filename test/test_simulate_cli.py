@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import json
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 from cli_inprocess import invoke
+from reliability_helpers import assert_one_line_error
 
 from pmsm_sysid.bagio import read_recording
 from pmsm_sysid.cli import main
@@ -20,22 +20,9 @@ from pmsm_sysid.core.physics.plant import load_plant
 REPO = Path(__file__).resolve().parents[1]
 
 
-def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    """``pmsm-sysid ARGS`` in this process (:mod:`cli_inprocess`)."""
-    return invoke(*args, cwd=cwd)
-
-
-def assert_one_line_error(proc: subprocess.CompletedProcess[str], fragment: str) -> None:
-    assert proc.returncode == 2, proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1, proc.stderr
-    assert "Traceback" not in proc.stderr
-    assert fragment in lines[0]
-
-
 def test_bag_equals_offline_simulation(tmp_path: Path) -> None:
     bag, summary = tmp_path / "bag", tmp_path / "summary.json"
-    proc = run_cli("simulate", "--plant", str(REPO / "plants" / "cogging.yaml"), "--duration",
+    proc = invoke("simulate", "--plant", str(REPO / "plants" / "cogging.yaml"), "--duration",
                    "2", "--seed", "4", "--out", str(bag), "--json", str(summary))
     assert proc.returncode == 0, proc.stderr
     assert "1000 samples at 500 Hz" in proc.stdout
@@ -89,7 +76,7 @@ def test_refuses_to_overwrite_unless_forced(tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     assert main(["simulate", "--duration", "0.5", "--out", str(bag)]) == 0
     before = sorted((p.name, p.stat().st_mtime_ns) for p in bag.iterdir())
-    proc = run_cli("simulate", "--duration", "0.5", "--out", str(bag))
+    proc = invoke("simulate", "--duration", "0.5", "--out", str(bag))
     assert_one_line_error(proc, "exists already; use --force")
     assert sorted((p.name, p.stat().st_mtime_ns) for p in bag.iterdir()) == before
     assert main(["simulate", "--duration", "0.5", "--seed", "1", "--out", str(bag),
@@ -112,7 +99,7 @@ def test_refuses_to_overwrite_unless_forced(tmp_path: Path) -> None:
 def test_bad_plant_file_exit_2_one_line(tmp_path: Path, plant_text: str, fragment: str) -> None:
     plant = tmp_path / "plant.yaml"
     plant.write_text(plant_text)
-    proc = run_cli("simulate", "--plant", str(plant), "--out", str(tmp_path / "bag"))
+    proc = invoke("simulate", "--plant", str(plant), "--out", str(tmp_path / "bag"))
     assert_one_line_error(proc, fragment)
     assert not (tmp_path / "bag").exists()
 

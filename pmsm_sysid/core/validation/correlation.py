@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 
 from ..errors import DataError
 
@@ -167,24 +168,17 @@ def _count_limit(n_lags: int, acf: FloatArray | None, lags: IntArray) -> int:
 
 @lru_cache(maxsize=64)
 def _binomial_limit(n_lags: int) -> int:
-    from scipy import stats  # here: importing scipy.stats costs about half a second, and the
-    # live nodes' own process imports this module but runs the tests in its workers
-
     return int(stats.binom.ppf(1.0 - ALPHA_COUNT, n_lags, 0.05))
 
 
 @lru_cache(maxsize=64)
 def _max_limit(n_lags: int) -> float:
     """Two-sided Bonferroni point for n_lags values at level ALPHA_MAX."""
-    from scipy import stats  # see _binomial_limit
-
     return float(stats.norm.ppf(1.0 - ALPHA_MAX / (2.0 * n_lags)))
 
 
 def false_rejection_rate(n_lags: int) -> float:
     """Probability that one test of ``n_lags`` independent null values fails (module doc)."""
-    from scipy import stats  # see _binomial_limit
-
     k = _binomial_limit(n_lags)
     q_far = 2.0 * float(stats.norm.sf(_max_limit(n_lags)))  # beyond the largest allowed
     q_in = 1.0 - 2.0 * float(stats.norm.sf(1.96))  # inside the band
