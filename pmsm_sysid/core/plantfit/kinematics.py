@@ -45,8 +45,13 @@ from .averaging import interval_effects, interval_force, interval_friction, sign
 from .calibration import SpeedPrior, calibrated_friction
 from .feedback import high_band
 from .instruments import reading_instruments
+from .memo import ContentCache, content_key
 
 FloatArray = NDArray[np.float64]
+
+#: Projected columns and friction regressors of the latest recordings (by content).
+PROJECTED = ContentCache(32 << 20)
+FRICTION = ContentCache(8 << 20)
 
 FILTER_ORDER = 4
 POWER_FRACTION = 0.99
@@ -226,15 +231,15 @@ class EquationData:
         return 1.0 / (self.period * self.filt.decimation)
 
     def project(self, col: FloatArray) -> FloatArray:
-        """L-filter, trim and decimate a full-rate column (or the columns of a 2-D array)."""
+        """L-filter, trim and decimate a full-rate column (or the columns of a 2-D array).
+
+        A fit projects the same columns for every plant and scan it tries: the results
+        are kept by content (:data:`PROJECTED`)."""
         arr = np.asarray(col, dtype=np.float64)
         e, d = self.filt.edge, self.filt.decimation
-        if not self.parts:
-            f = sosfiltfilt(self.sos, arr, axis=0)
-            out: FloatArray = np.ascontiguousarray(f[e:len(f) - e:d])
-            return out
-        pieces = [sosfiltfilt(self.sos, arr[a:b], axis=0) for a, b in self.instants()]
-        return np.ascontiguousarray(np.concatenate([f[e:len(f) - e:d] for f in pieces]))
+        bounds = tuple(self.instants()) if self.parts else ()
+        key = content_key("project", self.sos, e, d, bounds, arr)
+        return PROJECTED.array(key, lambda: _projected(self.sos, arr, e, d, bounds))
 
     def pair(self, per_interval: FloatArray) -> FloatArray:
         """Map a per-interval quantity (mean over [t_k, t_k+1)) to the equation instants."""
@@ -253,8 +258,11 @@ class EquationData:
         if self.prior is None:
             return interval_friction(self.v_lo, self.v_hi, self.sign_smoothing_mps,
                                      stribeck_mps)
-        return calibrated_friction(self.prior, self.v_lo, self.v_hi, SIGN_SMOOTHING_MPS,
-                                   stribeck_mps)
+        p = self.prior
+        key = content_key("friction", p.grid, p.density, p.kernel, self.v_lo, self.v_hi,
+                          SIGN_SMOOTHING_MPS, float(stribeck_mps))
+        return FRICTION.array(key, lambda: calibrated_friction(
+            p, self.v_lo, self.v_hi, SIGN_SMOOTHING_MPS, stribeck_mps))
 
     def forced(self, tau: float = 0.0, delay: float = 0.0) -> FloatArray:
         """Applied force at the equation instants for a lag/delay on the command."""
@@ -289,6 +297,18 @@ class EquationData:
         out: FloatArray = np.concatenate([q @ (q.T @ cols[a:b]) for q, (a, b)
                                           in zip(self.inst, edges, strict=True)])
         return out
+
+
+def _projected(sos: FloatArray, arr: FloatArray, e: int, d: int,
+               bounds: tuple[tuple[int, int], ...]) -> FloatArray:
+    """``arr`` zero-phase filtered, ``e`` samples trimmed at each end and every ``d``-th
+    kept: as one, or per part (``bounds``, rows of ``arr``) and the parts joined."""
+    if not bounds:
+        f = sosfiltfilt(sos, arr, axis=0)
+        out: FloatArray = np.ascontiguousarray(f[e:len(f) - e:d])
+        return out
+    pieces = [sosfiltfilt(sos, arr[a:b], axis=0) for a, b in bounds]
+    return np.ascontiguousarray(np.concatenate([f[e:len(f) - e:d] for f in pieces]))
 
 
 def _nominal_dynamics(plant: Plant, rec: Recording, mode: str) -> tuple[FloatArray, ...]:

@@ -19,15 +19,27 @@ from scipy.linalg import solve_toeplitz
 from scipy.signal import lfilter
 
 from ..validation.correlation import fit_metrics
+from .memo import ContentCache, content_key
 
 FloatArray = NDArray[np.float64]
 
 MAX_AR_ORDER = 20
+#: Whitening filters of the latest residuals (by content).
+WHITENERS = ContentCache(1 << 20)
 
 
 def ar_whitener(e: FloatArray, max_order: int = MAX_AR_ORDER) -> FloatArray:
-    """Polynomial [1, -a1, ..., -ap] whitening ``e`` (Yule-Walker, order by BIC)."""
-    x = np.asarray(e, dtype=np.float64) - float(np.mean(e))
+    """Polynomial [1, -a1, ..., -ap] whitening ``e`` (Yule-Walker, order by BIC).
+
+    The tests of one fit whiten the same residual again and again: the filters are kept
+    by content (:data:`WHITENERS`)."""
+    arr = np.asarray(e, dtype=np.float64)
+    key = content_key("ar_whitener", arr, int(max_order))
+    return WHITENERS.array(key, lambda: _ar_whitener(arr, max_order))
+
+
+def _ar_whitener(e: FloatArray, max_order: int) -> FloatArray:
+    x = e - float(np.mean(e))
     n = len(x)
     max_order = max(0, min(max_order, n // 10))
     r = np.array([float(x[: n - j] @ x[j:]) for j in range(max_order + 1)]) / n
