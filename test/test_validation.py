@@ -155,3 +155,24 @@ def test_validate_reports_divergence() -> None:
     unstable = NarxModel.from_terms({"y(k-1)": 1.3, "u(k-1)": 0.8})
     rep = validate_narx(unstable, y, u, y, u)
     assert rep.free_run_diverged and rep.estimation.nmse == np.inf
+
+
+def test_the_binomial_limits_are_scipy_stats_quantiles() -> None:
+    """The correlation tests' count limit and Bonferroni point (computed with scipy.special)
+    equal scipy.stats' binomial and normal quantiles, and the window test's tail its
+    survival function."""
+    from scipy import stats
+
+    from pmsm_sysid.core.validation import correlation
+    from pmsm_sysid.core.validation.windows import NULL_RATE, window_rate
+
+    for n_lags in range(1, 201):
+        assert correlation._binomial_limit(n_lags) == int(
+            stats.binom.ppf(1.0 - correlation.ALPHA_COUNT, n_lags, 0.05))
+        assert correlation._max_limit(n_lags) == pytest.approx(
+            float(stats.norm.ppf(1.0 - correlation.ALPHA_MAX / (2.0 * n_lags))), rel=1e-14)
+    for made in (1, 12, 52, 120):
+        for failed in range(1, made + 1):
+            want = float(stats.binom.sf(failed - 1, made, NULL_RATE))
+            got = window_rate(made - failed, made)["p_value"]
+            assert got == pytest.approx(want, rel=1e-9, abs=1e-300)
