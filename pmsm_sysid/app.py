@@ -35,26 +35,17 @@ from rclpy.parameter import Parameter
 from .core.errors import PmsmSysidError
 from .core.physics.plant import Plant
 from .diagnosed import diagnosis_summary, run_history
+from .pipeline_nodes import DEFAULT_NODES, NODES, parse_nodes
 from .topics import DEFAULT_NAMESPACE
 
-NODES = ("sim", "identifier", "gfrf", "diagnose")
-DEFAULT_NODES = ("sim", "identifier", "gfrf")  # the diagnosis needs a reference: added on demand
 BACKLOG = 200  # samples the sim may run ahead of the identifier under back-pressure
 RECORD_BACKLOG = 2000  # ... and ahead of the recorder (it queues 10000 per topic)
 MATCH_S = 30.0  # how long to wait for the recorder process to match the publishers
+#: While the stepped sim waits for a fit, how long the executor may block between looks
+#: (rather than spin at full CPU beside the workers doing the fits).
+BUSY_WAIT_S = 0.002
 SETTLE_S = 5.0  # after the sim's last sample, how long the identifier may still take
 DIAGNOSE_WAIT_S = 300.0  # at the end, how long an outstanding diagnosis may still take
-
-
-def parse_nodes(text: str | Sequence[str]) -> tuple[str, ...]:
-    """``"sim,identifier"`` -> ("sim", "identifier"); PmsmSysidError on unknown or empty."""
-    items = [s.strip() for s in (text.split(",") if isinstance(text, str) else text)]
-    items = [s for s in items if s]
-    bad = [s for s in items if s not in NODES]
-    if bad or not items:
-        raise PmsmSysidError(f"--nodes takes a comma list of {', '.join(NODES)} (got "
-                         f"'{','.join(items) if not bad else ','.join(bad)}')")
-    return tuple(dict.fromkeys(items))
 
 
 def overrides(values: Mapping[str, Any] | None) -> list[Parameter]:
@@ -129,9 +120,19 @@ class Pipeline:
                 settle = settle or time.monotonic() + SETTLE_S
                 if time.monotonic() > settle:
                     return  # what has not arrived by now is counted missing, not awaited
+            wait = 0.05
             if self.stepped:
-                self._step_sim(limit)
-            self.executor.spin_once(timeout_sec=0.0 if self.stepped else 0.05)
+                wait = BUSY_WAIT_S if self._step_sim(limit) else 0.0
+                self._take_pending()
+            self.executor.spin_once(timeout_sec=wait)
+
+    def _take_pending(self) -> None:
+        """The consumers here take the samples just published, without a round of the
+        executor each (its wait set costs more than a burst's messages)."""
+        if self.identifier is not None:
+            self.identifier.take_pending()
+        if self.diagnose is not None:
+            self.diagnose.take_pending()
 
     def _caught_up(self) -> bool:
         return all(e.samples_received >= self.sim.published for e in self.consumers)
@@ -143,13 +144,13 @@ class Pipeline:
         return bool(ident.engine.idle and g.received >= ident.models_published
                     and g.worker.stats.processed + g.queue.skipped >= g.received)
 
-    def _step_sim(self, limit: int | None) -> None:
+    def _step_sim(self, limit: int | None) -> bool:
         """Publish the next burst unless the identifier, the diagnosis (or the recorder) is
         behind (the GFRF node analyses the newest models and counts what it skips; with
         ``gfrf_every_model`` the sim waits for it too). At most ``hop`` samples are in
         flight (published, not yet taken by the identifier or the diagnosis) and none is
         published while a window or a span waits for its worker, so at most one becomes due
-        per burst and none is ever skipped."""
+        per burst and none is ever skipped. Returns True while a consumer is behind."""
         sim, engines = self.sim, self.consumers
         backlog = sim.published - min(e.samples_received for e in engines)
         busy = any(e.windows_waiting > 0 for e in engines)
@@ -164,6 +165,7 @@ class Pipeline:
             self.identifier.hold_input(busy)
         if room > 0 and not busy:
             sim.step(max(room, 0))
+        return busy
 
     def finish(self, timeout_s: float = 30.0) -> None:
         """Let other processes acknowledge the sim's last samples, fit what is queued and

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+from pathlib import Path
 
 import pytest
 from narx_systems import QUADRATIC, simulate, white_input
@@ -75,3 +76,44 @@ def test_worker_runs_elsewhere_reraises_and_replaces_a_dead_process() -> None:
         assert worker.pid not in (None, pid)
     with pytest.raises(WorkerDied):
         worker(None)  # closed
+
+
+GATED = '''
+import pathlib, time
+gate = pathlib.Path({gate!r})
+deadline = time.monotonic() + 120.0
+while not gate.exists() and time.monotonic() < deadline:
+    time.sleep(0.01)
+pathlib.Path({done!r}).touch()
+'''
+
+SCRIPT = '''
+import operator, pathlib, sys
+from pmsm_sysid.core.online import workerproc
+
+workerproc.PRELOAD = (*workerproc.PRELOAD, "gated_preload")
+workerproc.start_server()
+worker = workerproc.ProcessWorker(operator.itemgetter, (1,))
+print("fork server done on return:", pathlib.Path(sys.argv[2]).exists(), flush=True)
+pathlib.Path(sys.argv[1]).touch()
+print("item:", worker([3, 4]), flush=True)
+worker.close()
+'''
+
+
+def test_a_worker_is_made_without_waiting_for_the_fork_servers_imports(
+        tmp_path: Path) -> None:
+    """start_server starts the imports early; a worker made meanwhile returns at once (its
+    process starts when the imports are done, and an item sent meanwhile waits for it)."""
+    import subprocess
+    import sys
+
+    gate, done = tmp_path / "gate", tmp_path / "done"
+    (tmp_path / "gated_preload.py").write_text(
+        GATED.format(gate=str(gate), done=str(done)))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(tmp_path), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    proc = subprocess.run([sys.executable, "-c", SCRIPT, str(gate), str(done)], env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.splitlines() == ["fork server done on return: False", "item: 4"]

@@ -177,6 +177,12 @@ class DiagnosisNode(Node):
         self.sim.push(signal, stamp_ns, value)
         self.sim_sizer.check(self.sim.aligner.period_ns)
 
+    def take_pending(self) -> None:
+        """Take the input messages already delivered, without waiting for the executor."""
+        self.intake.take_pending()
+        if getattr(self, "sim_intake", None) is not None:
+            self.sim_intake.take_pending()
+
     def _speed_published(self, intake: InputIntake | None) -> bool:
         return intake is not None and self.count_publishers(intake.topics["speed"]) > 0
 

@@ -237,9 +237,21 @@ class IdentifierNode(Node):
             if not took:
                 return
 
+    def take_pending(self) -> None:
+        """Take the input messages already delivered, without waiting for the executor
+        (a pipeline that steps the sim itself calls it after each burst: the executor's
+        own work per round costs more than the messages)."""
+        if getattr(self, "_joint_sub", None) is not None:
+            self._drain_joint()
+        elif getattr(self, "_subs", None):
+            self._drain()
+
     def _on_joint_state(self, msg: Any) -> None:
         """One JointState message, then what already waits (as :meth:`_drain`)."""
         self._take_joint(msg)
+        self._drain_joint()
+
+    def _drain_joint(self) -> None:
         sub = self._joint_sub
         for _ in range(3 * DRAIN_ROUNDS):
             with sub.handle:

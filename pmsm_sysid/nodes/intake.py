@@ -55,6 +55,10 @@ class InputIntake:
             got = (stamp_to_ns(msg.header.stamp), sample_value(sig, msg))
         self._push(sig, *got)
 
+    def take_pending(self) -> None:
+        """Take the messages already delivered, without waiting for the executor."""
+        self._drain()
+
     def _drain(self) -> None:
         for _ in range(DRAIN_ROUNDS):
             took = False

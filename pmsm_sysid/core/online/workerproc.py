@@ -19,6 +19,7 @@ so it could not say so) ends itself within half a second.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import threading
@@ -95,6 +96,21 @@ def _context() -> Any:
     return ctx
 
 
+def start_server() -> None:
+    """Start the fork server now, so that its imports (:data:`PRELOAD`, about a second of
+    CPU) run beside the caller's own start-up instead of delaying its first worker."""
+    _context()
+    from multiprocessing import forkserver
+
+    forkserver.ensure_running()
+
+
+def _warm_up(pool: ProcessPoolExecutor) -> None:
+    # closed (or broken) before its process started: nothing to warm up
+    with contextlib.suppress(RuntimeError, BrokenProcessPool):
+        pool.submit(_ready)
+
+
 class ProcessWorker(Generic[T, R]):
     """``factory(*args)`` in a dedicated worker process; ``worker(item)`` runs ``method``
     of it there on ``item`` and returns the result (exceptions are re-raised here).
@@ -116,7 +132,11 @@ class ProcessWorker(Generic[T, R]):
     def _start(self) -> ProcessPoolExecutor:
         pool = ProcessPoolExecutor(max_workers=1, mp_context=_context(),
                                    initializer=_build, initargs=self._spec)
-        pool.submit(_ready)  # start and warm up the process now, not at the first item
+        # start and warm up the process now, not at the first item, from a thread: the
+        # fork server may still be importing its modules (start_server), and the caller
+        # need not wait for that (an item sent meanwhile waits for the process)
+        threading.Thread(target=_warm_up, args=(pool,), name="worker-start",
+                         daemon=True).start()
         return pool
 
     def __call__(self, item: T) -> R:
