@@ -38,7 +38,7 @@ lint: $(STAMP)
 test: $(STAMP) lint browser
 	ROS_LOG_DIR=$$(mktemp -d) $(PY) -m pytest -n 2 --dist loadgroup -q test
 
-# the edit-test loop: lint + the tests that need no ROS and are not slow (80 s on 2 idle cores)
+# the edit-test loop: lint + the tests that need no ROS and are not slow (85-88 s on 2 idle cores)
 check: $(STAMP) lint
 	$(PY) -m pytest -n 2 --dist loadgroup -q --without-ros -m "not slow" test
 
