@@ -206,22 +206,22 @@ def _check(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..core.online.workerproc import start_server
+    from ..core.physics.plant import load_plant
     from ..pipeline_nodes import WORKER_NODES, parse_nodes
 
     _check(args)
     nodes = parse_nodes(args.nodes)
-    if set(nodes) & set(WORKER_NODES) or args.diagnose or args.diagnose_sim:
-        start_server()  # the workers' imports, beside this process's own below
+    params = node_params(args)
+    nodes = _with_diagnosis(nodes, args, params["diagnose"])
+    plant = load_plant(args.plant)
+    if set(nodes) & set(WORKER_NODES):  # every input checked: the workers' imports can
+        start_server()  # start, beside this process's own below
 
     from ..app import build_pipeline
-    from ..core.physics.plant import load_plant
     from ..rosutil import stop_on_signals
     from .common import replace_bag_dir, write_json
     from .run_verdict import headline, verdict
 
-    params = node_params(args)
-    nodes = _with_diagnosis(nodes, args, params["diagnose"])
-    plant = load_plant(args.plant)
     if args.record:
         replace_bag_dir(Path(args.record), args.force)  # checked at the start: ours to replace
     with build_pipeline(nodes, plant=plant, excitation=args.excitation, seed=args.seed,
