@@ -121,7 +121,6 @@ def _peak_rss_mb() -> float:
 class DaskRuns:
     """One local cluster (started as the command starts it) and the rounds it analysed."""
 
-    workers: int
     client: Any
     seconds: float  # the cluster's start, then each round's time added
     cpu_here: float = 0.0
@@ -157,7 +156,7 @@ def _started(stack: ExitStack, workers: int) -> DaskRuns:
 
     start, cpu = time.perf_counter(), _cpu_s()
     client = stack.enter_context(local_cluster(workers))
-    return DaskRuns(workers, client, time.perf_counter() - start, _cpu_s() - cpu)
+    return DaskRuns(client, time.perf_counter() - start, _cpu_s() - cpu)
 
 
 def run_rounds(rounds: list[Path]) -> dict[str, Any]:

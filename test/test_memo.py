@@ -99,3 +99,13 @@ def test_the_fits_columns_are_the_same_with_and_without_the_store(cold: None) ->
     for x, y, z in zip(first, again, fresh, strict=True):
         assert np.array_equal(x, y) and np.array_equal(x, z)
     assert not np.array_equal(data.friction(0.004), data.friction())
+
+
+def test_shared_values_are_the_kept_object_and_the_count_bound_holds() -> None:
+    cache = ContentCache(1 << 20, max_items=2)
+    first = cache.shared(b"a", lambda: (1, 2), lambda v: 16)
+    assert cache.shared(b"a", lambda: (3, 4), lambda v: 16) is first
+    cache.shared(b"b", lambda: (5,), lambda v: 8)
+    cache.shared(b"c", lambda: (6,), lambda v: 8)  # a third: the oldest goes
+    assert cache.shared(b"a", lambda: (7,), lambda v: 8) == (7,)
+    assert cache.hits == 1 and cache.nbytes <= 32

@@ -180,7 +180,7 @@ class DiagnosisNode(Node):
     def take_pending(self) -> None:
         """Take the input messages already delivered, without waiting for the executor."""
         self.intake.take_pending()
-        if getattr(self, "sim_intake", None) is not None:
+        if self.sim is not None:  # the reference is a simulator's topics
             self.sim_intake.take_pending()
 
     def _speed_published(self, intake: InputIntake | None) -> bool:

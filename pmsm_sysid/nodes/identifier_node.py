@@ -241,9 +241,9 @@ class IdentifierNode(Node):
         """Take the input messages already delivered, without waiting for the executor
         (a pipeline that steps the sim itself calls it after each burst: the executor's
         own work per round costs more than the messages)."""
-        if getattr(self, "_joint_sub", None) is not None:
+        if self.params["input_layout"] == "joint_state":
             self._drain_joint()
-        elif getattr(self, "_subs", None):
+        else:
             self._drain()
 
     def _on_joint_state(self, msg: Any) -> None:

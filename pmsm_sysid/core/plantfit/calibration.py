@@ -22,14 +22,13 @@ equation instant comes from its antiderivative, as in :func:`.averaging.interval
 
 from __future__ import annotations
 
-import hashlib
 import math
-import threading
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
+from .memo import ContentCache, content_key
 
 FloatArray = NDArray[np.float64]
 
@@ -37,6 +36,9 @@ RL_ITERATIONS = 50
 POINTS_PER_WIDTH = 5  # grid points per noise width (or per quarter of the sign's width)
 FLAT_FLOOR = 1e-6  # of the prior's peak: where the data have no speeds, a flat prior
 CACHED_PRIORS = 16  # priors kept for the speed records seen last (SpeedPrior.from_speeds)
+#: The priors themselves, by the content of the speeds, noise and base (the byte bound only
+#: guards against huge grids; the count is what bounds them).
+PRIORS = ContentCache(256 << 20, max_items=CACHED_PRIORS)
 
 
 @dataclass(frozen=True)
@@ -56,19 +58,9 @@ class SpeedPrior:
         same speeds each time: the priors of the last few speed records are kept (keyed by
         their bytes), so the deconvolution runs once per recording."""
         v = np.ascontiguousarray(speeds, dtype=np.float64)
-        key = (hashlib.blake2b(v.tobytes(), digest_size=16).digest(), v.shape, float(sigma),
-               float(base))
-        with _LOCK:
-            hit = _PRIORS.get(key)
-            if hit is not None:
-                _PRIORS.move_to_end(key)
-                return hit
-        prior = cls._deconvolved(v, sigma, base)
-        with _LOCK:
-            _PRIORS[key] = prior
-            while len(_PRIORS) > CACHED_PRIORS:
-                _PRIORS.popitem(last=False)
-        return prior
+        key = content_key("speed prior", v, float(sigma), float(base))
+        return PRIORS.shared(key, lambda: cls._deconvolved(v, sigma, base),
+                             lambda p: p.grid.nbytes + p.density.nbytes + p.kernel.nbytes)
 
     @classmethod
     def _deconvolved(cls, v: FloatArray, sigma: float, base: float) -> SpeedPrior:
@@ -132,5 +124,3 @@ def calibrated_friction(prior: SpeedPrior, v_lo: FloatArray, v_hi: FloatArray,
                                v_lo, v_hi)
 
 
-_PRIORS: OrderedDict[tuple[bytes, tuple[int, ...], float, float], SpeedPrior] = OrderedDict()
-_LOCK = threading.Lock()
