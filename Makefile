@@ -15,6 +15,10 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
+# Let Python keep compiled modules (__pycache__, ignored by git): a shell that sets
+# PYTHONDONTWRITEBYTECODE would make each of the suite's processes compile the package and
+# pytest rewrite every test module again (about 4 s of each test process's start).
+unexport PYTHONDONTWRITEBYTECODE
 
 .PHONY: venv demo test check browser lint typecheck bags bench docs colcon clean
 
