@@ -6,20 +6,21 @@ recording has no speed topic, so the identifier derives speed from position live
 same causal differentiator the offline readers use; every window it fits (speed and
 position) must be the model ``identify`` finds offline on the same samples: the same terms,
 estimates equal to 1e-9. A slice of the recording keeps the replay short (4 s of its own
-pace, at half speed); ``diagnose`` reads the whole recording.
+pace, at half speed); ``diagnose`` reads the whole recording. The offline verbs run in this
+process.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from cli_inprocess import invoke
 from conftest import EMPS_MAT
 from replay_helpers import (
     assert_identify_verb_agrees,
@@ -101,9 +102,8 @@ def test_emps_walkthrough_live_equals_offline(ros_context: Any, ros_env: int,
     cli = assert_identify_verb_agrees(part, last, a, env, tmp_path / "identify.json")
     assert cli["speed_derived"] is True
     diag = tmp_path / "diag.json"
-    proc = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "diagnose", "--plant",
-                           str(REPO / "plants" / "emps.yaml"), "--real", str(full), "--json",
-                           str(diag)], env=env, capture_output=True, text=True, timeout=300)
+    proc = invoke("diagnose", "--plant", str(REPO / "plants" / "emps.yaml"), "--real",
+                  str(full), "--json", str(diag), env=env)
     assert proc.returncode == 0, proc.stderr
     named = {e["name"]: e for e in json.loads(diag.read_text())["effects"]}
     assert named["coulomb_friction"]["params"]["amplitude_n"] == pytest.approx(20.39, rel=0.05)
