@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -40,10 +41,12 @@ def test_a_bad_reference_is_one_line_and_exit_2(args: list[str], match: str, ros
     bad.write_text("mass_kg: 2.0\nwheels: 4\n")
     argv = ["run", "--clock", "sim", "--duration", "1",
             *[a.replace("{plant}", str(bad)) for a in args]]
-    try:
-        code = main(argv)
-    except SystemExit as exc:  # argparse's own errors
-        code = exc.code
+    with warnings.catch_warnings():  # a process would print it: one more line
+        warnings.simplefilter("error", RuntimeWarning)
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # argparse's own errors
+            code = exc.code
     out, err = capsys.readouterr()
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1 and match in lines[0], err
