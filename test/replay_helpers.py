@@ -1,5 +1,16 @@
 """Shared pieces of the live-equals-offline tests: replay a bag (its own process) into an
-in-process pipeline, and compare each live model with the offline fit of the same window."""
+in-process pipeline, and compare each live model with the offline fit of the same window.
+
+:func:`fast`: the replay options for a test that compares models, not timing, of a bag whose
+samples travel on ONE topic (a ``JointState``): ``--fast``, paced bursts as fast as the
+subscribers' queues allow. Every queue on the way holds ``SLACK_DEPTH`` (10000) messages per
+topic -- the replay's reliable publishers, the identifier's subscriptions and the
+recorder's -- so a bag of at most that many messages loses none to a subscriber starved for
+a while (a message the transport drops in a burst is resent: late, not lost). Not for
+separate thrust/speed/position topics: the identifier joins those by stamp and gives up a
+sample once 16 newer ones wait behind it, and a resent message puts its topic that far
+behind the others (seen: 2500 of each arrived, 400 aligned); those replay paced (``--rate``).
+The windows come faster than they are fitted: the pipeline's ``queue_size`` must hold them."""
 
 from __future__ import annotations
 
@@ -13,9 +24,19 @@ from typing import Any
 
 import numpy as np
 import pytest
+from cli_inprocess import invoke
 
 from pmsm_sysid.core.selection.identify import FitConfig, identify_recording
 from pmsm_sysid.core.terms.model import NarxModel, Structure
+
+
+def fast(n_per_topic: int) -> tuple[str, ...]:
+    """The ``replay`` options for a one-topic bag of ``n_per_topic`` messages (module doc);
+    that many must fit every queue on the way, else a starved subscriber could lose some."""
+    from pmsm_sysid.rosutil import SLACK_DEPTH  # rclpy: only where a test replays
+
+    assert n_per_topic <= SLACK_DEPTH, (n_per_topic, SLACK_DEPTH)
+    return ("--fast",)
 
 
 @dataclass(frozen=True)
@@ -104,13 +125,11 @@ def assert_live_equals_offline(model: dict[str, Any], rec: Any, a: int, b: int) 
 
 def assert_identify_verb_agrees(bag: Path, model: dict[str, Any], a: int, env: dict[str, str],
                                 out: Path) -> dict[str, Any]:
-    """``pmsm-sysid identify BAG --estimate a:a+n`` gives the live model's terms and
-    estimates; returns the verb's JSON."""
+    """``pmsm-sysid identify BAG --estimate a:a+n`` (in this process: an offline verb) gives
+    the live model's terms and estimates; returns the verb's JSON."""
     b = a + model["window"]["n_samples"]
-    proc = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "identify", str(bag),
-                           "--estimate", f"{a}:{b}", "--no-validate", "--method",
-                           model["method"], "--json", str(out)],
-                          env=env, capture_output=True, text=True, timeout=300)
+    proc = invoke("identify", str(bag), "--estimate", f"{a}:{b}", "--no-validate", "--method",
+                  model["method"], "--json", str(out), env=env)
     assert proc.returncode == 0, proc.stderr
     cli: dict[str, Any] = json.loads(out.read_text())
     assert [t["name"] for t in cli["terms"]] == [t["name"] for t in model["terms"]]

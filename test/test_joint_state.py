@@ -18,7 +18,12 @@ from typing import Any
 import numpy as np
 import pytest
 from cli_inprocess import invoke
-from replay_helpers import assert_live_equals_offline, replay_into_pipeline, write_joint_state_bag
+from replay_helpers import (
+    assert_live_equals_offline,
+    fast,
+    replay_into_pipeline,
+    write_joint_state_bag,
+)
 
 from pmsm_sysid.core.physics.excitation import make_excitation
 from pmsm_sysid.core.physics.motor import simulate
@@ -29,6 +34,9 @@ N = 2500
 JOINTS = ("gripper", "axis", "wrist")
 ONLY_THE_LAYOUT = {"input_layout": "joint_state", "joint_name": "axis"}
 H1_ONLY = {"orders": [1]}  # the GFRF node's cheapest analysis: this test is about the inputs
+#: the bag is replayed faster than real time (the models are compared, not the timing): the
+#: windows come faster than they are fitted, and the identifier's queue holds them all
+QUEUE_ALL = {"queue_size": 16}
 
 
 def _recording() -> Any:
@@ -66,8 +74,9 @@ def test_replayed_ros2_control_bag_reaches_the_identifier_with_the_layout_alone(
         ros_context: Any, ros_env: int, tmp_path: Path) -> None:
     bag = write_joint_state_bag(_recording(), tmp_path / "robot", joints=JOINTS)
     run = replay_into_pipeline(bag, _env(ros_env, tmp_path), ros_context, N,
-                               replay_args=("--wait", "30"), deadline_s=120,
-                               identifier_params=ONLY_THE_LAYOUT, gfrf_params=H1_ONLY)
+                               replay_args=("--wait", "30", *fast(N)), deadline_s=120,
+                               identifier_params=ONLY_THE_LAYOUT | QUEUE_ALL,
+                               gfrf_params=H1_ONLY)
     _check_every_sample_and_the_offline_models(run, bag, "/joint_states")
 
 
@@ -83,8 +92,9 @@ def test_namespaced_robot_is_one_remap_away_and_recorded(ros_env: int, tmp_path:
     remap = ["--ros-args", "-r", "/joint_states:=/robot1/joint_states"]
     live = tmp_path / "live"
     run = replay_into_pipeline(bag, _env(ros_env, tmp_path), None, N,
-                               replay_args=("--wait", "30", "--subscribers", "2"),
-                               deadline_s=120, identifier_params=ONLY_THE_LAYOUT,
+                               replay_args=("--wait", "30", "--subscribers", "2",
+                                            *fast(N)),
+                               deadline_s=120, identifier_params=ONLY_THE_LAYOUT | QUEUE_ALL,
                                gfrf_params=H1_ONLY, domain_id=ros_env, ros_args=remap,
                                record=str(live))
     _check_every_sample_and_the_offline_models(run, bag, "/robot1/joint_states",

@@ -4,7 +4,8 @@
 run as two subprocesses on the test's own ROS domain; the models they publish (read back
 from the recording) equal the models of the same sim + seed in one process, window by window
 (windows sit on the sample-index grid of the stamps, so both cut the same windows; the motor
-side waits with ``--wait`` until the identification side has matched its publishers).
+side, started beside the identification side, waits with ``--wait`` until that has matched
+its publishers).
 """
 
 from __future__ import annotations
@@ -90,14 +91,23 @@ def test_two_processes_give_the_one_process_models(ros_context: Any, ros_env: in
                              env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         err_lines = _Lines(ident)
-        err_lines.wait_for("running", 120)  # the identification side spins
-        sim = subprocess.run([*CLI, "--nodes", "sim", "--clock", "sim", "--rate", "1",
-                              "--wait", "60", "--subscribers", "2",  # identifier, recorder
-                              "--excitation", "broadband",
-                              "--plant", str(PLANT), "--seed", "7", "--duration", str(SECONDS),
-                              "--json", str(tmp_path / "sim.json")],
-                             env=env, capture_output=True, text=True, timeout=120)
-        assert sim.returncode == 0, sim.stderr
+        # started beside it: the motor side publishes nothing before both subscribers of the
+        # identification side (identifier, recorder) have matched its publishers
+        sim = subprocess.Popen([*CLI, "--nodes", "sim", "--clock", "sim", "--rate", "1",
+                                "--wait", "60", "--subscribers", "2",
+                                "--excitation", "broadband",
+                                "--plant", str(PLANT), "--seed", "7", "--duration",
+                                str(SECONDS), "--json", str(tmp_path / "sim.json")],
+                               env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+        try:
+            err_lines.wait_for("running", 120)  # the identification side spins
+            _, sim_err = sim.communicate(timeout=120)
+        finally:
+            if sim.poll() is None:
+                sim.kill()
+                sim.wait()
+        assert sim.returncode == 0, sim_err
         # stop it as a user would, once the last samples have arrived (the recorder has them)
         deadline = time.monotonic() + 120
         while _recorded_inputs(bag) < 3 * SECONDS * 500 and time.monotonic() < deadline:
