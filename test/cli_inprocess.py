@@ -2,9 +2,10 @@
 (``pmsm_sysid.cli.main``: its exit status, stdout and stderr), without starting a Python
 and importing numpy, scipy and matplotlib again for every call (about 1.2 s of CPU each).
 
-Only for the offline verbs (no ROS, no signals, no processes of their own); the console
-scripts themselves are run as processes in test_install.py, and the ROS verbs, the fleet
-and every signal or kill test stay separate processes.
+Only for the offline verbs (no ROS, no signals, no processes of their own) and for the
+fleet's bad arguments (refused before it starts a cluster); the console scripts themselves
+are run as processes in test_install.py, and the ROS verbs, a fleet that runs, and every
+signal or kill test stay separate processes.
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ from pathlib import Path
 
 from pmsm_sysid.cli import main
 
-OFFLINE = ("simulate", "identify", "gfrf", "diagnose", "fit-plant", "report", "import-mat")
+OFFLINE = ("simulate", "identify", "gfrf", "diagnose", "fit-plant", "report", "import-mat",
+           "fleet")
 
 
 @contextmanager

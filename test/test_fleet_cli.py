@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+from cli_inprocess import invoke
 from fleet_helpers import EXE, NOMINAL, drive, recording
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
@@ -36,6 +37,15 @@ def _fleet(*args: str, timeout: float = DEADLINE_S,
     env = dict(os.environ, PMSM_SYSID_PROGRESS="1" if bar else "0")
     return subprocess.run([str(EXE), "fleet", *args], capture_output=True, text=True,
                           timeout=timeout, check=False, env=env)
+
+
+def _in_process(*args: str) -> subprocess.CompletedProcess[str]:
+    """``pmsm-sysid fleet ARGS`` that starts no cluster (refused before any work, or nothing
+    left to analyse), run in this process: its exit status, stdout and stderr as the console
+    script gives them, without an interpreter started for it. The executable's own exit
+    status and stderr line are checked on a scheduler that does not answer (its own
+    process), and every fleet that runs rows is a process of its own."""
+    return invoke("fleet", *args, env=dict(os.environ, PMSM_SYSID_PROGRESS="0"))
 
 
 def _one_line(proc: subprocess.CompletedProcess[str], *fragments: str) -> str:
@@ -57,10 +67,10 @@ def _free_port() -> int:
 
 
 def test_no_recordings_is_one_line_before_any_work(tmp_path: Path) -> None:
-    proc = _fleet("--plant", str(NOMINAL), "--out", str(tmp_path / "out"))
+    proc = _in_process("--plant", str(NOMINAL), "--out", str(tmp_path / "out"))
     _one_line(proc, "pmsm-sysid fleet: error:", "no recordings given")
-    proc = _fleet(str(tmp_path / "nowhere"), "--plant", str(NOMINAL), "--out",
-                  str(tmp_path / "out"))
+    proc = _in_process(str(tmp_path / "nowhere"), "--plant", str(NOMINAL), "--out",
+                       str(tmp_path / "out"))
     _one_line(proc, "nowhere: no such file or directory")
     assert not (tmp_path / "out").exists()
 
@@ -71,7 +81,7 @@ def test_an_output_directory_holding_other_things_is_refused(tmp_path: Path) -> 
     out.mkdir()
     (out / "thesis.tex").write_text("years of work")
     for extra in ([], ["--force"], ["--resume"]):
-        proc = _fleet(str(bag), "--plant", str(NOMINAL), "--out", str(out), *extra)
+        proc = _in_process(str(bag), "--plant", str(NOMINAL), "--out", str(out), *extra)
         _one_line(proc, f"--out {out}: holds other things (thesis.tex)")
     assert sorted(p.name for p in out.iterdir()) == ["thesis.tex"]
 
@@ -85,8 +95,8 @@ def test_a_scheduler_that_does_not_answer_is_one_line_before_any_work(tmp_path: 
     _one_line(proc, f"--scheduler {address}: no Dask scheduler answers there within 5 s")
     assert time.monotonic() - started < 120  # the connect timeout, not a hang
     assert not (tmp_path / "out").exists()
-    proc = _fleet(str(bag), "--plant", str(NOMINAL), "--out", str(tmp_path / "out"),
-                  "--scheduler", "tcp://127.0.0.1:notaport")
+    proc = _in_process(str(bag), "--plant", str(NOMINAL), "--out", str(tmp_path / "out"),
+                       "--scheduler", "tcp://127.0.0.1:notaport")
     _one_line(proc, "--scheduler tcp://127.0.0.1:notaport: not a scheduler address")
 
 
@@ -238,7 +248,7 @@ def test_a_batch_killed_half_way_resumes_without_losing_or_repeating_a_row(
     moved.mkdir()
     for i, p in enumerate(five_recordings[:2]):
         shutil.copytree(p, moved / f"copy{i}")
-    third = _fleet(str(moved), *args[5:], "--resume")
+    third = _in_process(str(moved), *args[5:], "--resume")  # nothing to analyse: no cluster
     assert third.returncode == 0 and "0 recording axes analysed" in third.stdout, third.stdout
 
 
@@ -266,10 +276,10 @@ def test_a_recording_of_the_simulator_is_the_reference_with_sim(
     manifest = json.loads((out / "fleet.json").read_text())
     assert set(manifest["reference"]) == {"sim_sha256", "sim_namespace"}
     # the rows were made against the simulation: resuming against a plant file is refused
-    _one_line(_fleet(*args, "--plant", str(NOMINAL), "--resume"), "another reference")
+    _one_line(_in_process(*args, "--plant", str(NOMINAL), "--resume"), "another reference")
     # a simulator's recording that cannot be read is refused before any work
-    _one_line(_fleet(*args[:2], "--out", str(tmp_path / "new"), "--sim",
-                     str(tmp_path / "nosim")), "nosim")
+    _one_line(_in_process(*args[:2], "--out", str(tmp_path / "new"), "--sim",
+                          str(tmp_path / "nosim")), "nosim")
     assert not (tmp_path / "new").exists()
 
 
