@@ -20,6 +20,9 @@ from pmsm_sysid.core.terms.model import Structure
 
 WINDOW = {"ny": 2, "nu": 2, "terms": 5, "estimate": (1000, 2000), "validate": (3000, 4000)}
 
+# the two long bags are written once: one test process runs this module (--dist loadgroup)
+pytestmark = pytest.mark.xdist_group("bag_streaming")
+
 
 def peak_bytes(fn: Callable[[], object]) -> int:
     tracemalloc.start()

@@ -108,6 +108,11 @@ def check_page(index: Path, expected: set[str]) -> None:
         assert px.shape[:2] == (h, w) and float(np.std(px)) > 0.05, path
 
 
+# the report of the bundled bag (and its gfrf JSON) is built once: one test process runs
+# this module (make test: --dist loadgroup)
+pytestmark = pytest.mark.xdist_group("report")
+
+
 @pytest.fixture(scope="module")
 def built(tmp_path_factory: pytest.TempPathFactory) -> ReportResult:
     out = tmp_path_factory.mktemp("report")

@@ -15,15 +15,13 @@ import html
 import json
 import re
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from conftest import Chromium
-from test_report import FIGURES, REPO, bundled_bag, check_page, png_size
+from test_report import FIGURES, REPO, bundled_bag, check_page, cli, png_size
 
 CHECK_JS = """<script>
 window.addEventListener('load', function () {
@@ -105,9 +103,7 @@ def _check_in_browser(chromium: Chromium, out: Path, figures: set[str],
 @pytest.mark.slow
 def test_report_images_load_in_headless_chromium(chromium: Chromium, tmp_path: Path) -> None:
     out = tmp_path / "report"
-    r = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "report", str(bundled_bag()),
-                        "--out", str(out)], capture_output=True, text=True, timeout=300,
-                       cwd=REPO)
+    r = cli("report", str(bundled_bag()), "--out", str(out))
     assert r.returncode == 0, r.stderr
     _check_in_browser(chromium, out, FIGURES, tmp_path)
 
@@ -117,12 +113,9 @@ def test_diagnose_report_loads_in_headless_chromium(chromium: Chromium,
                                                     tmp_path: Path) -> None:
     """diagnose --report: the common figures and one before/after figure per named effect."""
     out = tmp_path / "report"
-    r = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "diagnose", "--plant",
-                        str(REPO / "plants" / "nominal.yaml"), "--real",
-                        str(REPO / "bags" / "concealed_two"), "--validate",
-                        str(REPO / "bags" / "concealed_two_validate"), "--no-gfrf",
-                        "--report", str(out)], capture_output=True, text=True, timeout=300,
-                       cwd=REPO)
+    r = cli("diagnose", "--plant", str(REPO / "plants" / "nominal.yaml"), "--real",
+            str(REPO / "bags" / "concealed_two"), "--validate",
+            str(REPO / "bags" / "concealed_two_validate"), "--no-gfrf", "--report", str(out))
     assert r.returncode == 0, r.stderr
     figures = {"diagnose_fit", "diagnose_residual_time", "diagnose_residual_vs_position",
                "diagnose_residual_vs_velocity", "diagnose_speed_replay",
