@@ -37,6 +37,7 @@ from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.context import Context
+from rclpy.guard_condition import GuardCondition
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
@@ -182,10 +183,12 @@ class DiagnosisNode(Node):
         self.sim.push(signal, stamp_ns, value)
         self.sim_sizer.check(self.sim.aligner.period_ns)
 
-    def wake_on_window(self) -> None:
+    def wake_on_window(self) -> GuardCondition:
         """From now on, each span the diagnosis thread takes wakes the executor spinning
-        this node (see :meth:`.IdentifierNode.wake_on_window`)."""
-        self._spans.on_take = self.create_guard_condition(lambda: None).trigger
+        this node (the guard condition returned; see :meth:`.IdentifierNode.wake_on_window`)."""
+        guard = self.create_guard_condition(lambda: None)
+        self._spans.on_take = guard.trigger
+        return guard
 
     def take_pending(self) -> None:
         """Take the input messages already delivered, without waiting for the executor."""

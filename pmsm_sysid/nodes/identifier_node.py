@@ -33,6 +33,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.context import Context
+from rclpy.guard_condition import GuardCondition
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
@@ -248,11 +249,13 @@ class IdentifierNode(Node):
         if took_any:
             self._input_seen()
 
-    def wake_on_window(self) -> None:
+    def wake_on_window(self) -> GuardCondition:
         """From now on, each window the fitting thread takes wakes the executor spinning
-        this node (a guard condition): a pipeline that holds its sim while a window waits
-        for the fitting worker sleeps until then instead of polling."""
-        self._fit.on_take = self.create_guard_condition(lambda: None).trigger
+        this node (the guard condition returned): a pipeline that holds its sim while a
+        window waits for the fitting worker sleeps until then instead of polling."""
+        guard = self.create_guard_condition(lambda: None)
+        self._fit.on_take = guard.trigger
+        return guard
 
     def take_pending(self) -> None:
         """Take the input messages already delivered, without waiting for the executor
