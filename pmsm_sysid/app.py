@@ -10,7 +10,9 @@ Clock: with ``clock="wall"`` the sim node paces itself to real time. With ``cloc
 and the identifier in the same process, the pipeline steps the simulator itself, in bursts
 of up to ``hop`` samples, whenever the identifier has taken what was published and no window
 waits for a fit (back-pressure), so the run is as fast as identification allows, loses nothing and
-skips no window (deterministic: same plant and seed, same models); without an identifier
+skips no window (deterministic: same plant and seed, same models); while a window waits, the
+executor sleeps until the fitting thread takes it (it triggers a guard condition of the
+identifier's, :meth:`.IdentifierNode.wake_on_window`), not polling; without an identifier
 here, the sim node runs at ``rate`` x real time on its own timer. With ``record``, the
 recorder runs in a process of its own (:mod:`.nodes.recorder_process`), started after the
 nodes (a sim elsewhere that waits for a subscriber finds the identifier first); the sim here

@@ -8,8 +8,13 @@ equal the offline simulation of the same plant and seed bit for bit):
 3. publish ``<ns>/thrust`` (WrenchStamped force.x = u; ``<ns>`` is the node's namespace,
    default ``/pmsm``: node ``/pmsm/pmsm_sim``, topic names relative to it), ``<ns>/speed``
    (TwistStamped linear.x), ``<ns>/position`` (PointStamped point.x), all with
-   ``header.stamp = t_k`` (and ``/clock = t_k`` first with the sim clock);
+   ``header.stamp = t_k``, as serialized messages (:class:`pmsm_sysid.rosutil.SampleEncoder`:
+   the same bytes, cheaper to publish);
 4. ``sim.advance(u)`` — u held over [t_k, t_{k+1}).
+
+With the sim clock ``/clock`` leads the data: while anyone subscribes to it, ``/clock = t_k``
+before each sample; while nobody does, once per :meth:`MotorSimNode.step`, before its first
+sample, at the stamp of its last (no sample is ever stamped after the latest ``/clock``).
 
 Clock (parameter ``clock``): ``wall`` stamps t_k = t_0 + k/fs (a drift-free sample clock
 started when the first sample is published, however long the node was held before: the
