@@ -247,18 +247,20 @@ class MotorSimNode(Node):
             if not per_sample:
                 clock.publish(self._encoder.clock(self.stamp_ns(self.stepper.k + n - 1)))
         stepper, encode, stamp_ns = self.stepper, self._encoder.encode, self.stamp_ns
-        thrust, speed, position = (self._pubs[sig].publish for sig in (THRUST, SPEED, POSITION))
-        for _ in range(n):
-            k, u, v, x = stepper.sample()
-            stamp = stamp_ns(k)
-            if per_sample:
-                clock.publish(self._encoder.clock(stamp))  # type: ignore[union-attr]
-            a, b, c = encode(stamp, stepper.sim.measured_thrust(u), v, x)
-            thrust(a)
-            speed(b)
-            position(c)
-            stepper.advance(u)
-            self.published += 1
+        handles = [self._pubs[sig].handle for sig in (THRUST, SPEED, POSITION)]
+        with handles[0], handles[1], handles[2]:  # held for the burst, not per message
+            thrust, speed, position = (h.publish_raw for h in handles)
+            for _ in range(n):
+                k, u, v, x = stepper.sample()
+                stamp = stamp_ns(k)
+                if per_sample:
+                    clock.publish(self._encoder.clock(stamp))  # type: ignore[union-attr]
+                a, b, c = encode(stamp, stepper.sim.measured_thrust(u), v, x)
+                thrust(a)
+                speed(b)
+                position(c)
+                stepper.advance(u)
+                self.published += 1
         if limit and self.published >= limit:
             self.finished = True
         return n
