@@ -10,7 +10,9 @@ Clock: with ``clock="wall"`` the sim node paces itself to real time. With ``cloc
 and the identifier in the same process, the pipeline steps the simulator itself, in bursts
 of up to ``hop`` samples, whenever the identifier has taken what was published and no window
 waits for a fit (back-pressure), so the run is as fast as identification allows, loses nothing and
-skips no window (deterministic: same plant and seed, same models); without an identifier
+skips no window (deterministic: same plant and seed, same models); while a window waits, the
+executor sleeps until the fitting thread takes it (it triggers a guard condition of the
+identifier's, :meth:`.IdentifierNode.wake_on_window`), not polling; without an identifier
 here, the sim node runs at ``rate`` x real time on its own timer. With ``record``, the
 recorder runs in a process of its own (:mod:`.nodes.recorder_process`), started after the
 nodes (a sim elsewhere that waits for a subscriber finds the identifier first); the sim here
@@ -41,9 +43,12 @@ from .topics import DEFAULT_NAMESPACE
 BACKLOG = 200  # samples the sim may run ahead of the identifier under back-pressure
 RECORD_BACKLOG = 2000  # ... and ahead of the recorder (it queues 10000 per topic)
 MATCH_S = 30.0  # how long to wait for the recorder process to match the publishers
-#: While the stepped sim waits for a fit, how long the executor may block between looks
-#: (rather than spin at full CPU beside the workers doing the fits).
+#: While the stepped sim waits for the recorder (or the GFRF node), how long the executor may
+#: block between looks (rather than spin at full CPU beside the processes it waits for).
 BUSY_WAIT_S = 0.002
+#: ... and while it waits for a fit: the fitting thread wakes the executor as it takes the
+#: waiting window, so this is only the longest sleep between looks.
+FIT_WAIT_S = 0.05
 SETTLE_S = 5.0  # after the sim's last sample, how long the identifier may still take
 DIAGNOSE_WAIT_S = 300.0  # at the end, how long an outstanding diagnosis may still take
 
@@ -122,7 +127,7 @@ class Pipeline:
                     return  # what has not arrived by now is counted missing, not awaited
             wait = 0.05
             if self.stepped:
-                wait = BUSY_WAIT_S if self._step_sim(limit) else 0.0
+                wait = self._step_sim(limit)
                 self._take_pending()
             self.executor.spin_once(timeout_sec=wait)
 
@@ -144,28 +149,35 @@ class Pipeline:
         return bool(ident.engine.idle and g.received >= ident.models_published
                     and g.worker.stats.processed + g.queue.skipped >= g.received)
 
-    def _step_sim(self, limit: int | None) -> bool:
+    def _step_sim(self, limit: int | None) -> float:
         """Publish the next burst unless the identifier, the diagnosis (or the recorder) is
         behind (the GFRF node analyses the newest models and counts what it skips; with
         ``gfrf_every_model`` the sim waits for it too). At most ``hop`` samples are in
         flight (published, not yet taken by the identifier or the diagnosis) and none is
         published while a window or a span waits for its worker, so at most one becomes due
-        per burst and none is ever skipped. Returns True while a consumer is behind."""
+        per burst and none is ever skipped. Returns how long the executor may then wait:
+        0 unless a consumer is behind; while only a fit is awaited, until the fitting
+        thread takes the window (it wakes the executor, :meth:`wake_on_window`)."""
         sim, engines = self.sim, self.consumers
         backlog = sim.published - min(e.samples_received for e in engines)
-        busy = any(e.windows_waiting > 0 for e in engines)
+        fitting = any(e.windows_waiting > 0 for e in engines)
+        behind = False
         if self.gfrf_every_model and self.gfrf is not None and self.identifier is not None:
-            busy = busy or not self._gfrf_caught_up()
+            behind = not self._gfrf_caught_up()
         if self.recorder is not None:
-            busy = busy or sim.published - self.recorder.samples_recorded >= RECORD_BACKLOG
+            behind = behind or sim.published - self.recorder.samples_recorded >= RECORD_BACKLOG
         room = min(BACKLOG, *(e.config.hop for e in engines)) - backlog
         if limit is not None:
             room = min(room, limit - sim.published)
         if self.identifier is not None:  # a pause of the sim here is not stale input
-            self.identifier.hold_input(busy)
-        if room > 0 and not busy:
-            sim.step(max(room, 0))
-        return busy
+            self.identifier.hold_input(fitting or behind)
+        if behind:
+            return BUSY_WAIT_S
+        if fitting:
+            return FIT_WAIT_S
+        if room > 0:
+            sim.step(room)
+        return 0.0
 
     def finish(self, timeout_s: float = 30.0) -> None:
         """Let other processes acknowledge the sim's last samples, fit what is queued and
@@ -341,6 +353,9 @@ def build_pipeline(
                 _wait_for_recorder(pipe, MATCH_S)
             if pipe.stepped:
                 pipe.sim.stop_timer()  # stepped by the pipeline (back-pressure)
+                for node in (pipe.identifier, pipe.diagnose):
+                    if node is not None:
+                        node.wake_on_window()
             elif pipe.sim is not None and wait_s > 0 and "identifier" not in names:
                 _wait_until_matched(pipe.sim, executor, wait_s, subscribers)
             pipe.started = time.monotonic()

@@ -7,6 +7,8 @@
   leave its spin loop and finalise its output (a bag, a JSON file) cleanly.
 - Stamp and message helpers: nanoseconds <-> ``builtin_interfaces/Time``, the standard three
   stamped messages <-> floats, message classes from rosbag2 type names.
+- :class:`SampleEncoder`: one sample's three messages (and ``/clock``) as CDR bytes, cheaper
+  to publish than messages.
 - :func:`data_qos`: the QoS of the data topics (reliable, keep-last 1000).
 """
 
@@ -15,6 +17,7 @@ from __future__ import annotations
 import importlib
 import os
 import signal
+import struct
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -229,3 +232,95 @@ def sample_value(signal_name: str, msg: Any) -> float:
     if signal_name == POSITION:
         return float(msg.point.x)
     raise PmsmSysidError(f"unknown signal '{signal_name}' (expected thrust, speed or position)")
+
+
+_ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR, little-endian
+_STAMP = struct.Struct("<iI")
+_VALUE = struct.Struct("<d")
+
+
+class SampleEncoder:
+    """The three messages of one sample (and a ``rosgraph_msgs/Clock``) as serialized CDR
+    bytes, for ``publisher.publish(bytes)``: what ``serialize_message`` gives for
+    :func:`make_sample_messages` with the same ``frame_id`` (its alignment padding zeroed),
+    at a fraction of the cost of publishing messages (no Python-to-C conversion per field).
+
+    Each message is a template whose stamp and value are patched in place (little-endian
+    CDR: the stamp right after the 4-byte encapsulation header, the value the first float64
+    after the frame id). The layout is checked once: the patched bytes must have the length
+    of ``serialize_message``'s and deserialize to the same messages; where they do not
+    (``raw`` False: another middleware or byte order) the messages are serialized one by one.
+    """
+
+    def __init__(self, frame_id: str = "") -> None:
+        from rclpy.serialization import serialize_message
+
+        self.frame_id = frame_id
+        self._serialize = serialize_message
+        text_end = 16 + len(frame_id.encode()) + 1
+        self._value_at = 4 + ((text_end - 4 + 7) & ~7)
+        self._bufs = [bytearray(serialize_message(m)) for m in self._messages(0, 0, 0, 0)]
+        for buf in self._bufs:  # the middleware leaves the alignment padding as it finds it
+            buf[text_end:self._value_at] = bytes(self._value_at - text_end)
+        self.raw = self._layout_holds()
+        if not self.raw:
+            self.encode, self.clock = self._serialized, self._clock_serialized  # type: ignore[method-assign]
+
+    def _layout_holds(self) -> bool:
+        from rclpy.serialization import deserialize_message
+        from rosgraph_msgs.msg import Clock
+
+        if not all(b[:4] == _ENCAPSULATION and len(b) >= self._value_at + 8
+                   for b in self._bufs):
+            return False
+        probe = (123_456_789_012, -1.25, 2.5e-3, -3.75e-6)
+        want = self._messages(*probe)
+        for got, ref, msg in zip(self._patched(*probe), self._serialized(*probe), want,
+                                 strict=True):
+            if len(got) != len(ref) or deserialize_message(got, type(msg)) != msg:
+                return False
+        clock = self._clock_raw(probe[0])
+        return (len(clock) == len(self._clock_serialized(probe[0]))
+                and deserialize_message(clock, Clock) == Clock(clock=stamp_from_ns(probe[0])))
+
+    def encode(self, stamp_ns: int, thrust: float, speed: float,
+               position: float) -> tuple[bytes, bytes, bytes]:
+        """(thrust, speed, position) messages of one sample, serialized."""
+        return self._patched(stamp_ns, thrust, speed, position)
+
+    def clock(self, stamp_ns: int) -> bytes:
+        """A ``rosgraph_msgs/Clock`` at ``stamp_ns``, serialized."""
+        return self._clock_raw(stamp_ns)
+
+    def _patched(self, stamp_ns: int, thrust: float, speed: float,
+                 position: float) -> tuple[bytes, bytes, bytes]:
+        sec, nanosec = divmod(stamp_ns, NS_PER_S)
+        at = self._value_at
+        a, b, c = self._bufs
+        _STAMP.pack_into(a, 4, sec, nanosec)
+        _VALUE.pack_into(a, at, thrust)
+        _STAMP.pack_into(b, 4, sec, nanosec)
+        _VALUE.pack_into(b, at, speed)
+        _STAMP.pack_into(c, 4, sec, nanosec)
+        _VALUE.pack_into(c, at, position)
+        return bytes(a), bytes(b), bytes(c)
+
+    @staticmethod
+    def _clock_raw(stamp_ns: int) -> bytes:
+        return _ENCAPSULATION + _STAMP.pack(*divmod(stamp_ns, NS_PER_S))
+
+    def _messages(self, stamp_ns: int, thrust: float, speed: float,
+                  position: float) -> list[Any]:
+        msgs = make_sample_messages(stamp_ns, thrust, speed, position, self.frame_id)
+        return [msgs[THRUST], msgs[SPEED], msgs[POSITION]]
+
+    def _serialized(self, stamp_ns: int, thrust: float, speed: float,
+                    position: float) -> tuple[bytes, bytes, bytes]:
+        a, b, c = (bytes(self._serialize(m))
+                   for m in self._messages(stamp_ns, thrust, speed, position))
+        return a, b, c
+
+    def _clock_serialized(self, stamp_ns: int) -> bytes:
+        from rosgraph_msgs.msg import Clock
+
+        return bytes(self._serialize(Clock(clock=stamp_from_ns(stamp_ns))))

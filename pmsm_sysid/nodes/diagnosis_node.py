@@ -37,6 +37,7 @@ from typing import Any
 
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.context import Context
+from rclpy.guard_condition import GuardCondition
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
@@ -98,13 +99,17 @@ def worker(plant: Any, label: str, where: str) -> Callable[[DiagnoseJob], dict[s
 
 class SpanDiagnosis:
     """``process(window)`` of the engine: the window and the current options as a job for
-    the worker (CPU of the worker process in ``cpu_s``; ``close`` ends it)."""
+    the worker (CPU of the worker process in ``cpu_s``; ``close`` ends it). ``on_take`` (if
+    set) is called as each span is taken, in the engine's thread."""
 
     def __init__(self, work: Callable[[DiagnoseJob], dict[str, Any]],
                  job: Callable[[Window], DiagnoseJob]) -> None:
         self._work, self._job = work, job
+        self.on_take: Callable[[], None] | None = None
 
     def __call__(self, window: Window) -> dict[str, Any]:
+        if self.on_take is not None:
+            self.on_take()
         return self._work(self._job(window))
 
     @property
@@ -141,13 +146,14 @@ class DiagnosisNode(Node):
         self.sim: LatestSpan | None = None
         fs_ns = round(1e9 / float(p["sample_rate_hz"])) if p["sample_rate_hz"] else None
         tol_ns = round(float(p["tolerance_s"]) * 1e9) or None
+        self._spans = SpanDiagnosis(worker(self.plant, self.reference, str(p["worker"])),
+                                    self._job)
         self.engine: OnlineEngine[dict[str, Any]] = OnlineEngine(
             EngineConfig(window=span, hop=period, queue_size=int(p["queue_size"]),
                          sample_rate_hz=float(p["sample_rate_hz"]),
                          tolerance_s=float(p["tolerance_s"]),
                          speed_source=str(p["speed_source"])),
-            SpanDiagnosis(worker(self.plant, self.reference, str(p["worker"])), self._job),
-            speed_expected=lambda: self._speed_published(self.intake))
+            self._spans, speed_expected=lambda: self._speed_published(self.intake))
         try:
             self.intake = InputIntake(self, self._push)
             if self.plant is None:
@@ -176,6 +182,13 @@ class DiagnosisNode(Node):
         assert self.sim is not None
         self.sim.push(signal, stamp_ns, value)
         self.sim_sizer.check(self.sim.aligner.period_ns)
+
+    def wake_on_window(self) -> GuardCondition:
+        """From now on, each span the diagnosis thread takes wakes the executor spinning
+        this node (the guard condition returned; see :meth:`.IdentifierNode.wake_on_window`)."""
+        guard = self.create_guard_condition(lambda: None)
+        self._spans.on_take = guard.trigger
+        return guard
 
     def take_pending(self) -> None:
         """Take the input messages already delivered, without waiting for the executor."""

@@ -33,6 +33,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.context import Context
+from rclpy.guard_condition import GuardCondition
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
@@ -218,24 +219,43 @@ class IdentifierNode(Node):
         self._input_seen()
         got = decode_stamped(data)
         if got is None:  # not little-endian CDR: the generic deserializer
-            msg = deserialize_message(data, self._types[sig])
-            got = (stamp_to_ns(msg.header.stamp), sample_value(sig, msg))
+            got = self._decode(sig, data)
         self.engine.push(sig, *got)
+
+    def _decode(self, sig: str, data: bytes) -> tuple[int, float]:
+        msg = deserialize_message(data, self._types[sig])
+        return stamp_to_ns(msg.header.stamp), sample_value(sig, msg)
 
     def _drain(self) -> None:
         """Take what already waits on the three input subscriptions, round robin, up to
         ``DRAIN_ROUNDS`` rounds: a burst costs one executor callback, not one per message
         (the executor's own work per callback is what limits the intake rate)."""
-        for _ in range(DRAIN_ROUNDS):
-            took = False
-            for sig, sub in self._subs.items():
-                with sub.handle:
-                    got = sub.handle.take_message(sub.msg_type, True)
-                if got is not None:
-                    self._take(sig, got[0])
-                    took = True
-            if not took:
-                return
+        subs = [(sig, sub.handle, sub.msg_type) for sig, sub in self._subs.items()]
+        push, took_any = self.engine.push, False
+        with subs[0][1], subs[1][1], subs[2][1]:
+            for _ in range(DRAIN_ROUNDS):
+                took = False
+                for sig, handle, msg_type in subs:
+                    got = handle.take_message(msg_type, True)
+                    if got is not None:
+                        took = True
+                        value = decode_stamped(got[0])
+                        if value is None:  # not little-endian CDR: the generic deserializer
+                            value = self._decode(sig, got[0])
+                        push(sig, *value)
+                if not took:
+                    break
+                took_any = True
+        if took_any:
+            self._input_seen()
+
+    def wake_on_window(self) -> GuardCondition:
+        """From now on, each window the fitting thread takes wakes the executor spinning
+        this node (the guard condition returned): a pipeline that holds its sim while a
+        window waits for the fitting worker sleeps until then instead of polling."""
+        guard = self.create_guard_condition(lambda: None)
+        self._fit.on_take = guard.trigger
+        return guard
 
     def take_pending(self) -> None:
         """Take the input messages already delivered, without waiting for the executor

@@ -174,7 +174,8 @@ class SwitchableProcessor(Generic[W, R]):
 
     ``switch(new, shape)``: windows whose ``shape_of(window)`` equals ``shape`` go to ``new``
     from then on (the old processor is closed, if it has ``close``); windows cut before the
-    change still go to the old one.
+    change still go to the old one. ``on_take`` (if set) is called as each window is taken,
+    in the fitting thread (e.g. to wake an executor waiting for the queue to empty).
     """
 
     def __init__(self, process: Callable[[W], R], shape_of: Callable[[W], Any]) -> None:
@@ -184,6 +185,7 @@ class SwitchableProcessor(Generic[W, R]):
         self._lock = threading.Lock()
         self._cpu_done = 0.0  # CPU seconds of closed worker processes
         self.switches = 0
+        self.on_take: Callable[[], None] | None = None
 
     @property
     def cpu_s(self) -> float:
@@ -197,6 +199,8 @@ class SwitchableProcessor(Generic[W, R]):
             _close(old[0])
 
     def __call__(self, window: W) -> R:
+        if self.on_take is not None:
+            self.on_take()
         with self._lock:
             if self._pending is not None and self._shape_of(window) == self._pending[1]:
                 old, self._current = self._current, self._pending[0]

@@ -8,8 +8,13 @@ equal the offline simulation of the same plant and seed bit for bit):
 3. publish ``<ns>/thrust`` (WrenchStamped force.x = u; ``<ns>`` is the node's namespace,
    default ``/pmsm``: node ``/pmsm/pmsm_sim``, topic names relative to it), ``<ns>/speed``
    (TwistStamped linear.x), ``<ns>/position`` (PointStamped point.x), all with
-   ``header.stamp = t_k`` (and ``/clock = t_k`` first with the sim clock);
+   ``header.stamp = t_k``, as serialized messages (:class:`pmsm_sysid.rosutil.SampleEncoder`:
+   the same bytes, cheaper to publish);
 4. ``sim.advance(u)`` — u held over [t_k, t_{k+1}).
+
+With the sim clock ``/clock`` leads the data: while anyone subscribes to it, ``/clock = t_k``
+before each sample; while nobody does, once per :meth:`MotorSimNode.step`, before its first
+sample, at the stamp of its last (no sample is ever stamped after the latest ``/clock``).
 
 Clock (parameter ``clock``): ``wall`` stamps t_k = t_0 + k/fs (a drift-free sample clock
 started when the first sample is published, however long the node was held before: the
@@ -54,7 +59,7 @@ from ..core.errors import ExcitationError, PmsmSysidError
 from ..core.physics.excitation import DEFAULT_AMPLITUDE_N, EXCITATIONS, ExcitationSource
 from ..core.physics.motor import MotorSimulator
 from ..core.physics.plant import EFFECT_BLOCKS, Plant, nominal_plant, plant_from_dict, plant_to_dict
-from ..rosutil import data_qos, make_sample_messages, seconds_to_ns, stamp_from_ns
+from ..rosutil import SampleEncoder, data_qos, message_class, seconds_to_ns
 from ..topics import DEFAULT_NAMESPACE, INPUT_TYPES, POSITION, SPEED, THRUST
 from .health import HealthPublisher, sim_health
 from .params import apply_or_refuse, declare_all, sim_specs
@@ -207,10 +212,9 @@ class MotorSimNode(Node):
         self.fs = self.stepper.sim.plant.sample_rate_hz
         self.published = 0
         self.finished = False
-        self._msgs = make_sample_messages(0, 0.0, 0.0, 0.0, v["frame_id"])
-        self._pubs = {sig: self.create_publisher(type(self._msgs[sig]), sig,
-                                                 data_qos(PUBLISH_DEPTH))
-                      for sig in INPUT_TYPES}
+        self._encoder = SampleEncoder(v["frame_id"])  # serialized messages: cheaper
+        self._pubs = {sig: self.create_publisher(message_class(t), sig, data_qos(PUBLISH_DEPTH))
+                      for sig, t in INPUT_TYPES.items()}
         self._clock_pub = (self.create_publisher(Clock, "/clock", 10)
                            if v["clock"] == "sim" else None)
         self._t0_ns = 0 if v["clock"] == "sim" else time.time_ns()
@@ -232,26 +236,34 @@ class MotorSimNode(Node):
     def step(self, n: int = 1) -> int:
         """Publish the next ``n`` samples now (fewer if ``max_samples`` is reached)."""
         limit = self.values["max_samples"]
-        done = 0
-        while done < n and not (limit and self.published >= limit):
-            k, u, speed, position = self.stepper.sample()
-            stamp = stamp_from_ns(self.stamp_ns(k))
-            if self._clock_pub is not None:
-                self._clock_pub.publish(Clock(clock=stamp))
-            m = self._msgs
-            for msg in m.values():
-                msg.header.stamp = stamp
-            m[THRUST].wrench.force.x = self.stepper.sim.measured_thrust(u)
-            m[SPEED].twist.linear.x = speed
-            m[POSITION].point.x = position
-            for sig in (THRUST, SPEED, POSITION):
-                self._pubs[sig].publish(m[sig])
-            self.stepper.advance(u)
-            self.published += 1
-            done += 1
+        if limit:
+            n = min(n, limit - self.published)
+        n = max(n, 0)
+        clock, per_sample = self._clock_pub, False
+        if clock is not None and n:
+            # /clock per sample for whoever listens to it; else once, first, at the newest
+            # stamp of the burst (its samples are never ahead of the clock)
+            per_sample = clock.get_subscription_count() > 0
+            if not per_sample:
+                clock.publish(self._encoder.clock(self.stamp_ns(self.stepper.k + n - 1)))
+        stepper, encode, stamp_ns = self.stepper, self._encoder.encode, self.stamp_ns
+        handles = [self._pubs[sig].handle for sig in (THRUST, SPEED, POSITION)]
+        with handles[0], handles[1], handles[2]:  # held for the burst, not per message
+            thrust, speed, position = (h.publish_raw for h in handles)
+            for _ in range(n):
+                k, u, v, x = stepper.sample()
+                stamp = stamp_ns(k)
+                if per_sample:
+                    clock.publish(self._encoder.clock(stamp))  # type: ignore[union-attr]
+                a, b, c = encode(stamp, stepper.sim.measured_thrust(u), v, x)
+                thrust(a)
+                speed(b)
+                position(c)
+                stepper.advance(u)
+                self.published += 1
         if limit and self.published >= limit:
             self.finished = True
-        return done
+        return n
 
     def stop_timer(self) -> None:
         """Stop the node's own pacing; the caller then publishes with :meth:`step`."""
