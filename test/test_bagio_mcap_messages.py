@@ -64,7 +64,8 @@ def test_the_same_messages_in_the_same_order_as_rosbags(bag: Path,
             want = list(reader.messages(connections=conns, start=window[0], stop=window[1]))
             got = list(mcap_messages.messages(reader, conns, *window))
             assert [(c.id, t) for c, t, _ in got] == [(c.id, t) for c, t, _ in want]
-            assert all(a[2] == b[2] and type(a[2]) is type(b[2]) for a, b in zip(got, want))
+            assert all(a[2] == b[2] and type(a[2]) is type(b[2])
+                       for a, b in zip(got, want, strict=True))
 
 
 def test_the_direct_read_is_the_one_taken(bag: Path, monkeypatch: pytest.MonkeyPatch) -> None:
