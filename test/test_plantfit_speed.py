@@ -3,12 +3,20 @@ bit: the AR whitener's Yule-Walker solve and root test, and the speed prior's di
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.linalg import solve_toeplitz
 from scipy.signal import lfilter
 
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.physics.motor import simulate
+from pmsm_sysid.core.physics.plant import SIGN_SMOOTHING_MPS, nominal_plant
 from pmsm_sysid.core.plantfit import stats
+from pmsm_sysid.core.plantfit.calibration import SpeedPrior, calibrated_friction
+from pmsm_sysid.core.plantfit.kinematics import equation_data
+from pmsm_sysid.core.plantfit.memo import content_key, read_only
 
 
 def _autocorrelation(e: np.ndarray, lags: int = 20) -> np.ndarray:
@@ -103,3 +111,47 @@ def test_a_non_finite_residual_is_refused_as_before() -> None:
     with pytest.raises(ValueError) as old:
         _ar_whitener_by_library(e, 20)
     assert str(new.value) == str(old.value)
+
+
+# --------------------------------------------------------------------------- prior digest
+
+
+def test_read_only_follows_the_memory_to_its_owner() -> None:
+    owner = np.arange(10.0)
+    view = owner[2:]
+    view.flags.writeable = False
+    assert not read_only(view)  # the owner can still change it
+    owner.flags.writeable = False
+    assert read_only(owner) and read_only(owner[2:])
+    assert read_only(np.frombuffer(b"\0" * 16))
+    assert not read_only(np.zeros(3))
+
+
+def test_the_prior_digest_is_its_content() -> None:
+    rng = np.random.default_rng(8)
+    v = rng.standard_normal(3000) * 0.05
+    a = SpeedPrior.from_speeds(v, 2e-3, 1e-3)
+    same = SpeedPrior._deconvolved(v.copy(), 2e-3, 1e-3)  # another object, same content
+    other = SpeedPrior.from_speeds(v * 1.01, 2e-3, 1e-3)
+    assert a.digest() == same.digest() != other.digest()
+    assert a.digest() == content_key("speed prior arrays", a.grid, a.density, a.kernel)
+    # a prior made of arrays that can change is hashed every time: a change is seen
+    loose = SpeedPrior(a.grid.copy(), a.density.copy(), a.kernel.copy())
+    before = loose.digest()
+    loose.density[0] += 1e-3
+    assert loose.digest() != before
+
+
+def test_friction_columns_are_keyed_by_the_prior() -> None:
+    """Two priors on the same speeds give each its own friction column (no false hit)."""
+    plant = nominal_plant()
+    rec = simulate(plant, make_excitation("paper-position", 2000, 500.0, seed=1), seed=0)
+    d = equation_data(plant, rec)
+    assert d.prior is not None
+    wide = SpeedPrior.from_speeds(np.concatenate([d.v_lo, d.v_hi]), 5 * d.speed_noise_mps,
+                                  SIGN_SMOOTHING_MPS)
+    d2 = dataclasses.replace(d, prior=wide)
+    for data in (d, d2, d):
+        want = calibrated_friction(data.prior, data.v_lo, data.v_hi, SIGN_SMOOTHING_MPS, 0.0)
+        assert np.array_equal(data.friction(), want)
+    assert not np.array_equal(d.friction(), d2.friction())

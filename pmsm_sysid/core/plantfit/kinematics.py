@@ -259,7 +259,7 @@ class EquationData:
             return interval_friction(self.v_lo, self.v_hi, self.sign_smoothing_mps,
                                      stribeck_mps)
         p = self.prior
-        key = content_key("friction", p.grid, p.density, p.kernel, self.v_lo, self.v_hi,
+        key = content_key("friction", p.digest(), self.v_lo, self.v_hi,
                           SIGN_SMOOTHING_MPS, float(stribeck_mps))
         return FRICTION.array(key, lambda: calibrated_friction(
             p, self.v_lo, self.v_hi, SIGN_SMOOTHING_MPS, stribeck_mps))
