@@ -15,7 +15,16 @@ from pmsm_sysid.core.physics.motor import simulate
 from pmsm_sysid.core.physics.plant import SIGN_SMOOTHING_MPS, nominal_plant
 from pmsm_sysid.core.plantfit import stats
 from pmsm_sysid.core.plantfit.calibration import SpeedPrior, calibrated_friction
-from pmsm_sysid.core.plantfit.kinematics import equation_data
+from pmsm_sysid.core.plantfit.kinematics import EquationData, equation_data, projected
+from pmsm_sysid.core.plantfit.library import (
+    FIRST_STAGE,
+    FIXED,
+    Family,
+    families,
+    family_chunks,
+    inputs_key,
+    raw_columns,
+)
 from pmsm_sysid.core.plantfit.memo import content_key, read_only
 
 
@@ -155,3 +164,67 @@ def test_friction_columns_are_keyed_by_the_prior() -> None:
         want = calibrated_friction(data.prior, data.v_lo, data.v_hi, SIGN_SMOOTHING_MPS, 0.0)
         assert np.array_equal(data.friction(), want)
     assert not np.array_equal(d.friction(), d2.friction())
+
+
+# --------------------------------------------------------------------------- family chunks
+
+
+def _changed(value: object, rng: np.random.Generator) -> object:
+    """The same kind of value, other content (None where there is no other of its kind)."""
+    if isinstance(value, np.ndarray):
+        return value * (1.0 + 0.01 * rng.standard_normal(value.shape)) + 1e-3
+    if isinstance(value, bool):
+        return not value
+    if isinstance(value, float):
+        return value * 1.37 + 1e-4
+    if isinstance(value, SpeedPrior):
+        return SpeedPrior._deconvolved(value.grid[::3] * 1.2, 3e-3, 1e-3)
+    if isinstance(value, tuple) and value and isinstance(value[0], np.ndarray):
+        return tuple(_changed(q, rng) for q in value)
+    return None
+
+
+def _fresh(fam: Family, data: EquationData) -> np.ndarray:
+    """The family's filtered columns computed without any cache."""
+    members = fam.members[:3]
+    raw = np.concatenate([raw_columns(e, data) for e in members], axis=1)
+    bounds = tuple(data.instants()) if data.parts else ()
+    return projected(data.sos, raw, data.filt.edge, data.filt.decimation, bounds)
+
+
+@pytest.mark.parametrize("noisy_reading", [False, True])
+def test_a_family_chunk_key_follows_every_field_its_columns_read(noisy_reading: bool) -> None:
+    """Each field of the data changed in turn: whenever a family's filtered columns change,
+    its key does (no false hit), and the chunks served are the ones computed fresh."""
+    rng = np.random.default_rng(4)
+    plant = nominal_plant()
+    rec = simulate(plant, make_excitation("paper-position", 3000, 500.0, seed=2), seed=0)
+    d = equation_data(plant, rec, thrust_gap=3 if noisy_reading else 0)
+    assert (d.inst is not None) == noisy_reading
+    fams = families(d)
+    assert {f.name for f in fams} >= {"cogging", "thrust_ripple", "stribeck_friction",
+                                      *FIXED}
+    changed = 0
+    for field in dataclasses.fields(EquationData):
+        other = _changed(getattr(d, field.name), rng)
+        if other is None:
+            continue
+        d2 = dataclasses.replace(d, **{field.name: other})
+        for fam in fams:
+            try:
+                differ = not np.array_equal(_fresh(fam, d), _fresh(fam, d2))
+            except (ValueError, IndexError):
+                differ = True  # the changed data do not even fit together
+            if differ:
+                changed += 1
+                assert inputs_key(fam.name, d) != inputs_key(fam.name, d2), (field.name,
+                                                                            fam.name)
+    assert changed > 20
+    for fam in fams:  # what the scan gets is what is computed fresh (kept or not)
+        for _ in range(2):
+            got = np.concatenate([c[i] for _, c in family_chunks(
+                Family(fam.name, fam.members[:3], 1.0), d) for i in range(len(c))], axis=1)
+            want = _fresh(fam, d)
+            if fam.name in FIRST_STAGE:
+                want = d.instrument(want)
+            assert np.array_equal(got, want)

@@ -239,7 +239,7 @@ class EquationData:
         e, d = self.filt.edge, self.filt.decimation
         bounds = tuple(self.instants()) if self.parts else ()
         key = content_key("project", self.sos, e, d, bounds, arr)
-        return PROJECTED.array(key, lambda: _projected(self.sos, arr, e, d, bounds))
+        return PROJECTED.array(key, lambda: projected(self.sos, arr, e, d, bounds))
 
     def pair(self, per_interval: FloatArray) -> FloatArray:
         """Map a per-interval quantity (mean over [t_k, t_k+1)) to the equation instants."""
@@ -299,7 +299,7 @@ class EquationData:
         return out
 
 
-def _projected(sos: FloatArray, arr: FloatArray, e: int, d: int,
+def projected(sos: FloatArray, arr: FloatArray, e: int, d: int,
                bounds: tuple[tuple[int, int], ...]) -> FloatArray:
     """``arr`` zero-phase filtered, ``e`` samples trimmed at each end and every ``d``-th
     kept: as one, or per part (``bounds``, rows of ``arr``) and the parts joined."""
