@@ -126,6 +126,14 @@ def _reason(exc: BaseException) -> str:
 @contextmanager
 def open_reader(path: str | Path) -> Iterator[Any]:
     """An open ``rosbags.rosbag2.Reader``; every failure becomes one-line :class:`BagError`."""
+    with opened(path) as reader, reading(Path(path)):
+        yield reader
+
+
+@contextmanager
+def opened(path: str | Path) -> Iterator[Any]:
+    """An open ``rosbags.rosbag2.Reader`` (a failure to open becomes one-line
+    :class:`BagError`): read it within :func:`reading`."""
     from rosbags.rosbag2 import Reader
 
     path = Path(path)
@@ -139,13 +147,20 @@ def open_reader(path: str | Path) -> Iterator[Any]:
         raise BagError(f"{path}: {_explain(path, exc)}") from exc
     try:
         yield reader
+    finally:
+        with suppress(Exception):  # closing a broken reader must not hide the cause
+            reader.close()
+
+
+@contextmanager
+def reading(path: Path) -> Iterator[None]:
+    """Reading an opened bag: every failure becomes one-line :class:`BagError`."""
+    try:
+        yield
     except PmsmSysidError:
         raise
     except Exception as exc:
         raise BagError(f"{path}: storage is corrupt or truncated ({_reason(exc)})") from exc
-    finally:
-        with suppress(Exception):  # closing a broken reader must not hide the cause
-            reader.close()
 
 
 def _precheck(path: Path) -> None:

@@ -13,6 +13,7 @@ import numpy as np
 from .. import topics as tp
 from ..core.errors import BagError, DataError
 from ..core.recording.align import align_streams, robust_period
+from . import mcap_messages
 from .cdr import decode_stamped
 from .common import MAX_NONFINITE_LISTED, LoadedRecording, RawMessage, open_reader, typestore
 
@@ -149,7 +150,7 @@ def _read_triple(reader: Any, chosen: dict[str, str], until: int | None,
     # the fast path only for the stock definitions (same type hash as ROS 2 Jazzy, or none)
     fast = {c.id for c in conns if c.digest in ("", store.hash_rihs01(c.msgtype))}
     start, stop, lo, hi = window or _WHOLE
-    for conn, _, data in reader.messages(connections=conns, start=start, stop=stop):
+    for conn, _, data in mcap_messages.messages(reader, conns, start, stop):
         stamps, values = streams[by_topic[conn.topic]]
         got = decode_stamped(data) if conn.id in fast else None
         if got is None:
@@ -297,22 +298,41 @@ def read_recording(
     """
     path = Path(path)
     with open_reader(path) as reader:
-        found = {c.topic: c.msgtype for c in reader.connections}
-        layout = _choose_layout(path, found, namespace)
-        if "joint_state" in layout:
-            streams, stopped = _read_joint(path, reader, layout["joint_state"], joint_name,
-                                           until_sample, window)
-            used = {layout["joint_state"]: tp.JOINT_STATE_TYPE}
-        else:
-            if joint_name is not None:
-                raise BagError(f"{path}: a joint was named ('{joint_name}') but the inputs are "
-                               f"{', '.join(layout.values())}, not a JointState topic")
-            streams, stopped = _read_triple(reader, layout, until_sample, window)
-            used = {topic: found[topic] for topic in layout.values()}
-            empty = [layout[s] for s in (tp.THRUST, tp.POSITION) if not streams[s][0]]
-            if empty:
-                raise BagError(f"{path}: no messages on {' and '.join(empty)} (empty recording)")
-        custom = getattr(reader.storage.metadata, "custom", None) or {}
+        got = _read_streams(path, reader, namespace, joint_name, until_sample, window)
+    return _aligned(path, got, tolerance_s)
+
+
+#: What :func:`_read_streams` read: streams, whether it stopped early, layout, topics found,
+#: topics used, the bag's custom metadata.
+_Read = tuple[dict[str, _Stream], bool, dict[str, str], dict[str, str], dict[str, str],
+              dict[str, Any]]
+
+
+def _read_streams(path: Path, reader: Any, namespace: str | None, joint_name: str | None,
+                  until_sample: int | None, window: Window | None) -> _Read:
+    """The input streams of the opened bag (read within :func:`.common.reading`)."""
+    found = {c.topic: c.msgtype for c in reader.connections}
+    layout = _choose_layout(path, found, namespace)
+    if "joint_state" in layout:
+        streams, stopped = _read_joint(path, reader, layout["joint_state"], joint_name,
+                                       until_sample, window)
+        used = {layout["joint_state"]: tp.JOINT_STATE_TYPE}
+    else:
+        if joint_name is not None:
+            raise BagError(f"{path}: a joint was named ('{joint_name}') but the inputs are "
+                           f"{', '.join(layout.values())}, not a JointState topic")
+        streams, stopped = _read_triple(reader, layout, until_sample, window)
+        used = {topic: found[topic] for topic in layout.values()}
+        empty = [layout[s] for s in (tp.THRUST, tp.POSITION) if not streams[s][0]]
+        if empty:
+            raise BagError(f"{path}: no messages on {' and '.join(empty)} (empty recording)")
+    custom = getattr(reader.storage.metadata, "custom", None) or {}
+    return streams, stopped, layout, found, used, custom
+
+
+def _aligned(path: Path, got: _Read, tolerance_s: float | None) -> LoadedRecording:
+    """The streams read aligned on one time axis (:func:`align_streams`)."""
+    streams, stopped, layout, found, used, custom = got
     complete = not stopped
     if stopped:
         streams = _common_horizon(streams)

@@ -21,9 +21,10 @@ from .. import topics as tp
 from ..core.errors import BagError, DataError
 from ..core.recording.signals import Recording
 from ..core.recording.spans import MAX_SAMPLES, Excerpt, excerpt_of, join, plan_spans
+from . import mcap_messages
 from .cdr import decode_stamped
-from .common import LoadedRecording, open_reader, typestore
-from .read import Window, _choose_layout, _stamp_ns, check_all_finite, read_recording
+from .common import LoadedRecording, opened, reading, typestore
+from .read import Window, _aligned, _choose_layout, _read_streams, _stamp_ns, check_all_finite
 
 #: Log-time margin around a span (ns): the recorder's delay between stamp and log time.
 MARGIN_NS = 2_000_000_000
@@ -38,22 +39,23 @@ def _stamp(conn: Any, data: bytes) -> int:
     return _stamp_ns(typestore().deserialize_cdr(data, conn.msgtype))
 
 
-def _extent(path: Path, namespace: str | None) -> tuple[int, int, int, int]:
+def _extent(path: Path, reader: Any, namespace: str | None) -> tuple[int, int, int, int]:
     """(samples, first stamp, its log time, last stamp) in ns, from the bag's index and its
     first and last position messages (the last read through the time index)."""
-    with open_reader(path) as reader:
-        found = {c.topic: c.msgtype for c in reader.connections}
-        layout = _choose_layout(path, found, namespace)
-        topic = layout.get("joint_state") or layout[tp.POSITION]
-        conns = [c for c in reader.connections if c.topic == topic]
-        count = sum(int(c.msgcount) for c in conns)
-        first = next(iter(reader.messages(connections=conns)), None)
-        if first is None:
-            raise BagError(f"{path}: no messages on {topic} (empty recording)")
-        stamp0 = _stamp(first[0], first[2])
-        tail = reader.messages(connections=conns, start=max(0, reader.end_time - MARGIN_NS))
-        last = max((_stamp(conn, data) for conn, _, data in tail), default=stamp0)
-        return count, stamp0, int(first[1]), last
+    found = {c.topic: c.msgtype for c in reader.connections}
+    layout = _choose_layout(path, found, namespace)
+    topic = layout.get("joint_state") or layout[tp.POSITION]
+    conns = [c for c in reader.connections if c.topic == topic]
+    count = sum(int(c.msgcount) for c in conns)
+    first = next(mcap_messages.messages(reader, conns), None)
+    if first is None:
+        raise BagError(f"{path}: no messages on {topic} (empty recording)")
+    stamp0 = _stamp(first[0], first[2])
+    tail = mcap_messages.messages(reader, conns, max(0, reader.end_time - MARGIN_NS))
+    last = max((_stamp(conn, data) for conn, _, data in tail), default=stamp0)
+    return count, stamp0, int(first[1]), last
+
+
 def read_excerpt(path: str | Path, *, namespace: str | None = None,
                  max_samples: int = MAX_SAMPLES, split: float | None = None,
                  joint_name: str | None = None, use: str | None = None) -> Excerpt:
@@ -66,15 +68,22 @@ def read_excerpt(path: str | Path, *, namespace: str | None = None,
     (:func:`.read.check_all_finite`); None: dropped, as on any read.
     """
     path = Path(path)
+    with opened(path) as reader:  # opened once: rosbags parses its YAML on every open
+        return _read_excerpt(path, reader, namespace, max_samples, split, joint_name, use)
 
+
+def _read_excerpt(path: Path, reader: Any, namespace: str | None, max_samples: int,
+                  split: float | None, joint_name: str | None, use: str | None) -> Excerpt:
     def read(window: Window | None) -> LoadedRecording:
-        loaded = read_recording(path, namespace=namespace, joint_name=joint_name,
-                                window=window)
+        with reading(path):
+            got = _read_streams(path, reader, namespace, joint_name, None, window)
+        loaded = _aligned(path, got, None)
         if use is not None:
             check_all_finite(loaded, f"recording {path}", use)
         return loaded
 
-    count, stamp0, log0, stamp1 = _extent(path, namespace)
+    with reading(path):
+        count, stamp0, log0, stamp1 = _extent(path, reader, namespace)
     if count <= max_samples or stamp1 <= stamp0:
         whole = read(None).recording
         return excerpt_of(whole, plan_spans(len(whole), max_samples, split))

@@ -239,7 +239,7 @@ class EquationData:
         e, d = self.filt.edge, self.filt.decimation
         bounds = tuple(self.instants()) if self.parts else ()
         key = content_key("project", self.sos, e, d, bounds, arr)
-        return PROJECTED.array(key, lambda: _projected(self.sos, arr, e, d, bounds))
+        return PROJECTED.array(key, lambda: projected(self.sos, arr, e, d, bounds))
 
     def pair(self, per_interval: FloatArray) -> FloatArray:
         """Map a per-interval quantity (mean over [t_k, t_k+1)) to the equation instants."""
@@ -259,7 +259,7 @@ class EquationData:
             return interval_friction(self.v_lo, self.v_hi, self.sign_smoothing_mps,
                                      stribeck_mps)
         p = self.prior
-        key = content_key("friction", p.grid, p.density, p.kernel, self.v_lo, self.v_hi,
+        key = content_key("friction", p.digest(), self.v_lo, self.v_hi,
                           SIGN_SMOOTHING_MPS, float(stribeck_mps))
         return FRICTION.array(key, lambda: calibrated_friction(
             p, self.v_lo, self.v_hi, SIGN_SMOOTHING_MPS, stribeck_mps))
@@ -299,7 +299,7 @@ class EquationData:
         return out
 
 
-def _projected(sos: FloatArray, arr: FloatArray, e: int, d: int,
+def projected(sos: FloatArray, arr: FloatArray, e: int, d: int,
                bounds: tuple[tuple[int, int], ...]) -> FloatArray:
     """``arr`` zero-phase filtered, ``e`` samples trimmed at each end and every ``d``-th
     kept: as one, or per part (``bounds``, rows of ``arr``) and the parts joined."""

@@ -28,13 +28,15 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DiagnoseError
 from .averaging import travel_gain
-from .kinematics import EquationData, thinned
+from .kinematics import PROJECTED, EquationData, projected, thinned
+from .memo import content_key
 
 FloatArray = NDArray[np.float64]
 
@@ -245,13 +247,63 @@ def families(data: EquationData, exclude: tuple[str, ...] = ()) -> list[Family]:
     return out
 
 
+def _raw_inputs(name: str, data: EquationData) -> tuple[Any, ...] | None:
+    """What :func:`raw_columns` reads of ``data`` for effects ``name`` (arrays, numbers),
+    or None if not listed here (test_plantfit_speed changes each field of the data in
+    turn: whenever the columns change, so do these)."""
+    if name in ("coulomb_friction", "stribeck_friction"):
+        prior = None if data.prior is None else data.prior.digest()
+        return data.v_lo, data.v_hi, data.sign_smoothing_mps, prior
+    if name == "viscous_error":
+        return (data.v_iv if data.inst is None else data.v_raw,)
+    if name == "mass_error":
+        return (data.a_iv if data.inst is None else data.a_raw,)
+    if name in ("force_offset", "spring"):
+        return (data.x,)
+    if name == "cogging":
+        return data.x, data.v, data.period, data.mode
+    if name == "thrust_ripple":
+        return data.x, data.v, data.period, data.mode, data.regressor_force
+    if name == "thrust_lag":
+        return data.cmd, data.period, data.mode, data.parts
+    return None
+
+
+def inputs_key(name: str, data: EquationData) -> bytes | None:
+    """Content key of everything a chunk of family ``name``'s filtered columns is made
+    of, before the members: its raw inputs and the filter (None: not keyed)."""
+    inputs = _raw_inputs(name, data)
+    if inputs is None:
+        return None
+    bounds = tuple(data.instants()) if data.parts else ()
+    return content_key("family inputs", name, *inputs, data.sos, data.filt.edge,
+                       data.filt.decimation, bounds)
+
+
+def _projected_chunk(chunk: tuple[Effect, ...], data: EquationData,
+                     inputs: bytes | None) -> FloatArray:
+    """The members' raw columns filtered (:meth:`.kinematics.EquationData.project`), kept
+    by the inputs' key and the members: measured, building and hashing the raw columns
+    was most of a scan whose filtered columns were already kept."""
+    def compute() -> FloatArray:
+        raw = np.concatenate([raw_columns(e, data) for e in chunk], axis=1)
+        if inputs is None:
+            return data.project(raw)
+        bounds = tuple(data.instants()) if data.parts else ()
+        return projected(data.sos, raw, data.filt.edge, data.filt.decimation, bounds)
+
+    if inputs is None:
+        return compute()
+    return PROJECTED.array(content_key("family chunk", inputs, chunk), compute)
+
+
 def family_chunks(fam: Family, data: EquationData) -> Iterator[tuple[int, FloatArray]]:
     """Filtered columns of the members, ``CHUNK`` columns at a time: (first member index,
     array of shape (members in chunk, n, width))."""
     width = fam.members[0].width
+    inputs = inputs_key(fam.name, data)
     for start, chunk in _chunks(fam.members, max(1, CHUNK // width)):
-        raw = np.concatenate([raw_columns(e, data) for e in chunk], axis=1)
-        proj = data.project(raw)
+        proj = _projected_chunk(chunk, data, inputs)
         if fam.name in FIRST_STAGE:
             proj = data.instrument(proj)
         yield start, proj.reshape(data.n, len(chunk), width).transpose(1, 0, 2)

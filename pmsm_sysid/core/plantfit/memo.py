@@ -42,6 +42,18 @@ def content_key(*parts: Any) -> bytes:
     return h.digest()
 
 
+def read_only(a: np.ndarray) -> bool:
+    """True when ``a`` and every array its memory belongs to are read-only (so its content
+    cannot change through any of them, unless someone sets ``writeable`` back on the
+    owner: arrays made read-only here are never written again)."""
+    base: object = a
+    while isinstance(base, np.ndarray):
+        if base.flags.writeable:
+            return False
+        base = base.base
+    return base is None or isinstance(base, bytes)
+
+
 class ContentCache:
     """A least-recently-used store of at most ``max_bytes`` in all, and at most
     ``max_items`` entries when given (thread-safe; a result is computed outside the lock,
@@ -113,4 +125,4 @@ class ContentCache:
         return self._bytes
 
 
-__all__ = ["ContentCache", "content_key"]
+__all__ = ["ContentCache", "content_key", "read_only"]

@@ -1,0 +1,230 @@
+"""The fit's hand-written fast paths give what the library calls they replace give, bit for
+bit: the AR whitener's Yule-Walker solve and root test, and the speed prior's digest."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.linalg import solve_toeplitz
+from scipy.signal import lfilter
+
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.physics.motor import simulate
+from pmsm_sysid.core.physics.plant import SIGN_SMOOTHING_MPS, nominal_plant
+from pmsm_sysid.core.plantfit import stats
+from pmsm_sysid.core.plantfit.calibration import SpeedPrior, calibrated_friction
+from pmsm_sysid.core.plantfit.kinematics import EquationData, equation_data, projected
+from pmsm_sysid.core.plantfit.library import (
+    FIRST_STAGE,
+    FIXED,
+    Family,
+    families,
+    family_chunks,
+    inputs_key,
+    raw_columns,
+)
+from pmsm_sysid.core.plantfit.memo import content_key, read_only
+
+
+def _autocorrelation(e: np.ndarray, lags: int = 20) -> np.ndarray:
+    x = e - e.mean()
+    n = len(x)
+    return np.array([float(x[: n - j] @ x[j:]) for j in range(lags + 1)]) / n
+
+
+def _residuals() -> list[np.ndarray]:
+    """White, AR(1) near the unit circle, and low-passed AR(2) residuals of many lengths."""
+    rng = np.random.default_rng(3)
+    out = []
+    for k in range(60):
+        e = rng.standard_normal(int(rng.integers(200, 4000)))
+        if k % 3:
+            e = lfilter([1.0], [1.0, -rng.uniform(0.5, 0.9995)], e)
+        if k % 3 == 2:
+            e = lfilter([1.0], [1.0, -1.6, 0.7], e)
+        out.append(e)
+    return out
+
+
+def test_yule_walker_is_solve_toeplitz_bit_for_bit() -> None:
+    for e in _residuals():
+        r = _autocorrelation(e)
+        for p in range(1, 21):
+            assert np.array_equal(stats._yule_walker(r, p), solve_toeplitz(r[:p], r[1:p + 1]))
+
+
+def test_a_singular_system_is_refused_as_solve_toeplitz_refuses_it() -> None:
+    r = np.array([0.0, 1.0, 0.5])
+    with pytest.raises(np.linalg.LinAlgError):
+        solve_toeplitz(r[:2], r[1:3])
+    with pytest.raises(np.linalg.LinAlgError):
+        stats._yule_walker(r, 2)
+
+
+def test_max_root_is_that_of_np_roots() -> None:
+    for e in _residuals():
+        r = _autocorrelation(e)
+        for p in range(1, 21):
+            poly = np.concatenate([[1.0], -solve_toeplitz(r[:p], r[1:p + 1])])
+            assert stats._max_root(poly) == np.max(np.abs(np.roots(poly)))
+    for poly in ([1.0, -0.5, 0.0], [1.0, 0.0], [1.0, -1.2, 0.0, 0.0], [1.0]):
+        p = np.array(poly)
+        want = float(np.max(np.abs(np.roots(p)))) if len(p) > 1 else 0.0
+        assert stats._max_root(p) == want
+
+
+def _ar_whitener_by_library(e: np.ndarray, max_order: int) -> np.ndarray:
+    """The whitener as written with solve_toeplitz and np.roots."""
+    import math
+    x = e - float(np.mean(e))
+    n = len(x)
+    max_order = max(0, min(max_order, n // 10))
+    r = np.array([float(x[: n - j] @ x[j:]) for j in range(max_order + 1)]) / n
+    if r[0] <= 0:
+        return np.ones(1)
+    best = (math.log(r[0]), np.ones(1))
+    for p in range(1, max_order + 1):
+        try:
+            a = solve_toeplitz(r[:p], r[1:p + 1])
+        except np.linalg.LinAlgError:
+            break
+        sigma2 = r[0] - float(np.dot(a, r[1:p + 1]))
+        if sigma2 <= 0:
+            break
+        poly = np.concatenate([[1.0], -a])
+        if np.max(np.abs(np.roots(poly))) >= 0.999:
+            break
+        bic = math.log(sigma2) + p * math.log(n) / n
+        if bic < best[0]:
+            best = (bic, poly)
+    return best[1]
+
+
+def test_the_whitener_is_the_library_one() -> None:
+    orders = set()
+    for e in _residuals():
+        for m in (20, 5):
+            got = stats._ar_whitener(e, m)
+            assert np.array_equal(got, _ar_whitener_by_library(e, m))
+            orders.add(len(got) - 1)
+    assert len(orders) > 3  # the cases reach several orders (and the unit-circle stop)
+
+
+def test_a_non_finite_residual_is_refused_as_before() -> None:
+    e = np.ones(300)
+    e[7] = np.nan
+    with pytest.raises(ValueError) as new:
+        stats._ar_whitener(e, 20)
+    with pytest.raises(ValueError) as old:
+        _ar_whitener_by_library(e, 20)
+    assert str(new.value) == str(old.value)
+
+
+# --------------------------------------------------------------------------- prior digest
+
+
+def test_read_only_follows_the_memory_to_its_owner() -> None:
+    owner = np.arange(10.0)
+    view = owner[2:]
+    view.flags.writeable = False
+    assert not read_only(view)  # the owner can still change it
+    owner.flags.writeable = False
+    assert read_only(owner) and read_only(owner[2:])
+    assert read_only(np.frombuffer(b"\0" * 16))
+    assert not read_only(np.zeros(3))
+
+
+def test_the_prior_digest_is_its_content() -> None:
+    rng = np.random.default_rng(8)
+    v = rng.standard_normal(3000) * 0.05
+    a = SpeedPrior.from_speeds(v, 2e-3, 1e-3)
+    same = SpeedPrior._deconvolved(v.copy(), 2e-3, 1e-3)  # another object, same content
+    other = SpeedPrior.from_speeds(v * 1.01, 2e-3, 1e-3)
+    assert a.digest() == same.digest() != other.digest()
+    assert a.digest() == content_key("speed prior arrays", a.grid, a.density, a.kernel)
+    # a prior made of arrays that can change is hashed every time: a change is seen
+    loose = SpeedPrior(a.grid.copy(), a.density.copy(), a.kernel.copy())
+    before = loose.digest()
+    loose.density[0] += 1e-3
+    assert loose.digest() != before
+
+
+def test_friction_columns_are_keyed_by_the_prior() -> None:
+    """Two priors on the same speeds give each its own friction column (no false hit)."""
+    plant = nominal_plant()
+    rec = simulate(plant, make_excitation("paper-position", 2000, 500.0, seed=1), seed=0)
+    d = equation_data(plant, rec)
+    assert d.prior is not None
+    wide = SpeedPrior.from_speeds(np.concatenate([d.v_lo, d.v_hi]), 5 * d.speed_noise_mps,
+                                  SIGN_SMOOTHING_MPS)
+    d2 = dataclasses.replace(d, prior=wide)
+    for data in (d, d2, d):
+        want = calibrated_friction(data.prior, data.v_lo, data.v_hi, SIGN_SMOOTHING_MPS, 0.0)
+        assert np.array_equal(data.friction(), want)
+    assert not np.array_equal(d.friction(), d2.friction())
+
+
+# --------------------------------------------------------------------------- family chunks
+
+
+def _changed(value: object, rng: np.random.Generator) -> object:
+    """The same kind of value, other content (None where there is no other of its kind)."""
+    if isinstance(value, np.ndarray):
+        return value * (1.0 + 0.01 * rng.standard_normal(value.shape)) + 1e-3
+    if isinstance(value, bool):
+        return not value
+    if isinstance(value, float):
+        return value * 1.37 + 1e-4
+    if isinstance(value, SpeedPrior):
+        return SpeedPrior._deconvolved(value.grid[::3] * 1.2, 3e-3, 1e-3)
+    if isinstance(value, tuple) and value and isinstance(value[0], np.ndarray):
+        return tuple(_changed(q, rng) for q in value)
+    return None
+
+
+def _fresh(fam: Family, data: EquationData) -> np.ndarray:
+    """The family's filtered columns computed without any cache."""
+    members = fam.members[:3]
+    raw = np.concatenate([raw_columns(e, data) for e in members], axis=1)
+    bounds = tuple(data.instants()) if data.parts else ()
+    return projected(data.sos, raw, data.filt.edge, data.filt.decimation, bounds)
+
+
+@pytest.mark.parametrize("noisy_reading", [False, True])
+def test_a_family_chunk_key_follows_every_field_its_columns_read(noisy_reading: bool) -> None:
+    """Each field of the data changed in turn: whenever a family's filtered columns change,
+    its key does (no false hit), and the chunks served are the ones computed fresh."""
+    rng = np.random.default_rng(4)
+    plant = nominal_plant()
+    rec = simulate(plant, make_excitation("paper-position", 3000, 500.0, seed=2), seed=0)
+    d = equation_data(plant, rec, thrust_gap=3 if noisy_reading else 0)
+    assert (d.inst is not None) == noisy_reading
+    fams = families(d)
+    assert {f.name for f in fams} >= {"cogging", "thrust_ripple", "stribeck_friction",
+                                      *FIXED}
+    changed = 0
+    for field in dataclasses.fields(EquationData):
+        other = _changed(getattr(d, field.name), rng)
+        if other is None:
+            continue
+        d2 = dataclasses.replace(d, **{field.name: other})
+        for fam in fams:
+            try:
+                differ = not np.array_equal(_fresh(fam, d), _fresh(fam, d2))
+            except (ValueError, IndexError):
+                differ = True  # the changed data do not even fit together
+            if differ:
+                changed += 1
+                assert inputs_key(fam.name, d) != inputs_key(fam.name, d2), (field.name,
+                                                                            fam.name)
+    assert changed > 20
+    for fam in fams:  # what the scan gets is what is computed fresh (kept or not)
+        for _ in range(2):
+            got = np.concatenate([c[i] for _, c in family_chunks(
+                Family(fam.name, fam.members[:3], 1.0), d) for i in range(len(c))], axis=1)
+            want = _fresh(fam, d)
+            if fam.name in FIRST_STAGE:
+                want = d.instrument(want)
+            assert np.array_equal(got, want)
