@@ -1,11 +1,14 @@
 """Shared pieces of the reliability tests: the command line (in process), one-line error checks, and
 bags written message by message (receive time and header stamp chosen independently, as a
-real recorder sees them)."""
+real recorder sees them). :func:`ros_verb` runs a ROS verb in this process (for the CLI
+tests of run, record, replay and monitor where the process is not what they check)."""
 
 from __future__ import annotations
 
 import json
+import os
 import subprocess
+import sys
 import warnings
 from collections.abc import Iterable
 from pathlib import Path
@@ -31,6 +34,40 @@ SMALL = ["--ny", "2", "--nu", "2", "--terms", "5"]  # the known system's structu
 def run_cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
     """``pmsm-sysid ARGS`` of an offline verb, in this process (:mod:`cli_inprocess`)."""
     return invoke(*args, env=env)
+
+
+def ros_verb(capfd: Any, *args: str) -> subprocess.CompletedProcess[str]:
+    """``pmsm-sysid ARGS`` of a ROS verb (run, record, replay, monitor) in this process: the
+    exit status, and stdout and stderr as captured at the file descriptors (``capfd``), so
+    that what rcl writes from C counts as a line too, as in a process. The environment is
+    restored after the call, and warnings are printed on stderr as a process prints them.
+    For input refused before any work, and for runs that end by themselves where the
+    process is not what the test checks; what is signalled or killed, or checked as the
+    user's process, runs as a process (one costs a Python, rclpy, numpy and scipy: about
+    1.5 s of CPU, and a fork server of its own)."""
+    capfd.readouterr()
+    saved = dict(os.environ)
+
+    def show(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+             file: object = None, line: str | None = None) -> None:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("default")
+            for category in (ResourceWarning, ImportWarning, PendingDeprecationWarning,
+                             DeprecationWarning):
+                warnings.filterwarnings("ignore", category=category)
+            warnings.showwarning = show
+            try:
+                code = main(list(args))
+            except SystemExit as exc:  # argparse: usage errors
+                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    finally:
+        os.environ.clear()
+        os.environ.update(saved)
+    out, err = capfd.readouterr()
+    return subprocess.CompletedProcess(["pmsm-sysid", *args], code, out, err)
 
 
 def assert_one_line_error(proc: subprocess.CompletedProcess[str], *fragments: str) -> str:

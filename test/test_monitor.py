@@ -278,12 +278,20 @@ def test_monitor_node_counts_a_live_stream(ros_context: object) -> None:
 
 @pytest.mark.ros
 def test_monitor_cli_once_writes_json(ros_env: int, tmp_path: Path) -> None:
-    """With nothing publishing, --once still exits 0 and writes an empty snapshot."""
+    """With nothing publishing, --once still exits 0 and writes an empty snapshot (to a
+    file, and to stdout: the two processes run side by side, both only listen)."""
     out = tmp_path / "snap.json"
-    proc = subprocess.run(
-        [sys.executable, "-m", "pmsm_sysid.cli", "monitor", "--once", "--duration", "0.5",
-         "--namespace", "/quiet", "--json", str(out)], capture_output=True, text=True,
-        timeout=60)
+    monitor = [sys.executable, "-m", "pmsm_sysid.cli", "monitor", "--once", "--duration", "0.5",
+               "--namespace", "/quiet", "--json"]
+    procs = [subprocess.Popen([*monitor, target], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for target in (str(out), "-")]
+    try:
+        done = [(p, *p.communicate(timeout=60)) for p in procs]
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+    proc, second = (subprocess.CompletedProcess(p.args, p.returncode, o, e) for p, o, e in done)
     assert proc.returncode == 0, proc.stderr
     snap = json.loads(out.read_text())
     assert len(snap["topics"]) == 9 and snap["namespace"] == "/quiet"  # 3 in, 6 out
@@ -295,16 +303,16 @@ def test_monitor_cli_once_writes_json(ros_env: int, tmp_path: Path) -> None:
     text = " ".join(proc.stdout.split())
     assert "nothing received on /quiet yet: is a pipeline publishing there with " \
            f"ROS_DOMAIN_ID={ros_env}?" in text
-    proc = subprocess.run(
-        [sys.executable, "-m", "pmsm_sysid.cli", "monitor", "--once", "--duration", "0.5",
-         "--namespace", "/quiet", "--json", "-"], capture_output=True, text=True, timeout=60)
+    proc = second
     assert proc.returncode == 0 and json.loads(proc.stdout)["namespace"] == "/quiet"
     assert proc.stderr.startswith("pmsm-sysid monitor: nothing received on /quiet yet")
 
 
-def test_monitor_cli_bad_interval_is_one_line(ros_env: int) -> None:
-    proc = subprocess.run(
-        [sys.executable, "-m", "pmsm_sysid.cli", "monitor", "--interval", "0"],
-        capture_output=True, text=True, timeout=60)
+def test_monitor_cli_bad_interval_is_one_line(ros_env: int,
+                                              capfd: pytest.CaptureFixture[str]) -> None:
+    """Refused before any work: in this process (reliability_helpers.ros_verb)."""
+    from reliability_helpers import ros_verb
+
+    proc = ros_verb(capfd, "monitor", "--interval", "0")
     assert proc.returncode == 2
     assert proc.stderr.strip().count("\n") == 0 and "--interval" in proc.stderr

@@ -179,7 +179,9 @@ def _env(domain: int, tmp: Path) -> dict[str, str]:
 @pytest.mark.ros
 @pytest.mark.slow
 def test_cli_replay_to_record_and_sigterm_finalises(ros_env: int, tmp_path: Path) -> None:
-    """Two processes: `record` (stopped by SIGTERM) and `replay --fast` of a simulated bag."""
+    """Two processes: `record` (stopped by SIGTERM) and `replay --fast` of a simulated bag.
+    Both start at once: the replay publishes nothing before the recorder has subscribed to
+    every topic (it waits for that, up to --wait)."""
     n, ns = 2000, _unique_ns()
     _make_bag(tmp_path / "sim", n)
     env = _env(ros_env, tmp_path)
@@ -187,21 +189,23 @@ def test_cli_replay_to_record_and_sigterm_finalises(ros_env: int, tmp_path: Path
     recorder = subprocess.Popen([*CLI, "record", "--out", str(tmp_path / "rec"),
                                  "--topics", *topics], env=env,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    replay = subprocess.Popen([*CLI, "replay", str(tmp_path / "sim"), "--fast", "--wait", "120",
+                               "--namespace", ns, "--json", "-"],
+                              env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         assert recorder.stdout is not None
         first = recorder.stdout.readline()      # printed once the subscriptions exist
         assert first.startswith(f"recording {', '.join(topics)} into"), first
-        replay = subprocess.run([*CLI, "replay", str(tmp_path / "sim"), "--fast",
-                                 "--namespace", ns, "--json", "-"],
-                                env=env, capture_output=True, text=True, timeout=120)
-        assert replay.returncode == 0, replay.stderr
-        sent = json.loads(replay.stdout)
+        replayed, replay_err = replay.communicate(timeout=180)
+        assert replay.returncode == 0, replay_err
+        sent = json.loads(replayed)
         assert sent["matched"] and sent["messages"] == 3 * n
         recorder.send_signal(signal.SIGTERM)
         out, err = recorder.communicate(timeout=30)
     finally:
-        if recorder.poll() is None:
-            recorder.kill()
+        for proc in (recorder, replay):
+            if proc.poll() is None:
+                proc.kill()
     assert recorder.returncode == 0, err
     assert f"recorded {tmp_path / 'rec'}: {3 * n} messages" in out
     original, recorded = _raw(tmp_path / "sim"), _raw(tmp_path / "rec")   # plain AnyReader
@@ -211,17 +215,20 @@ def test_cli_replay_to_record_and_sigterm_finalises(ros_env: int, tmp_path: Path
 
 
 @pytest.mark.ros
-def test_cli_errors_are_one_line(ros_env: int, tmp_path: Path) -> None:
-    env = _env(ros_env, tmp_path)
+def test_cli_errors_are_one_line(ros_env: int, tmp_path: Path,
+                                 capfd: pytest.CaptureFixture[str]) -> None:
+    """Refused before any work: in this process (reliability_helpers.ros_verb)."""
+    from reliability_helpers import ros_verb
+
     cases = [
-        ([*CLI, "replay", str(tmp_path / "missing")], "no such bag"),
-        ([*CLI, "replay", str(REPO / "README.md")], "not a rosbag2"),
-        ([*CLI, "replay", str(tmp_path), "--rate", "-1"], "--rate: must be >= 0"),
-        ([*CLI, "record", "--out", str(REPO / "README.md")], "exists already"),
-        ([*CLI, "record", "--out", str(tmp_path / "x"), "--duration", "0"], "--duration"),
+        (["replay", str(tmp_path / "missing")], "no such bag"),
+        (["replay", str(REPO / "README.md")], "not a rosbag2"),
+        (["replay", str(tmp_path), "--rate", "-1"], "--rate: must be >= 0"),
+        (["record", "--out", str(REPO / "README.md")], "exists already"),
+        (["record", "--out", str(tmp_path / "x"), "--duration", "0"], "--duration"),
     ]
     for argv, text in cases:
-        proc = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=60)
+        proc = ros_verb(capfd, *argv)
         assert proc.returncode == 2, (argv, proc.stderr)
         lines = proc.stderr.strip().splitlines()
         assert len(lines) == 1 and text in lines[0], (argv, proc.stderr)

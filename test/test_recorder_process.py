@@ -1,6 +1,9 @@
 """The recorder in a process of its own (nodes/recorder_process.py): what it counts is what
 the bag holds, losses are counted, and a SIGKILLed owner leaves a finalised bag holding every
-message up to the kill. Completion conditions only (message counts, files), no timing."""
+message up to the kill. Completion conditions only (message counts, files), no timing.
+
+The owner is this test process where it stops the recorder itself (the recorder is a
+process of its own all the same); a Python of its own only where it is killed."""
 
 from __future__ import annotations
 
@@ -24,8 +27,8 @@ REPO = Path(__file__).resolve().parents[1]
 N = 600
 PERIOD_NS = 2_000_000
 
-# publishes N samples (every 7th sample skipped when SKIP is set) once the recorder matched,
-# waits until the recorder holds them all, then kills itself (no clean-up can run)
+# publishes N samples once the recorder matched, waits until the recorder holds them all,
+# then kills itself (no clean-up can run): _publish_and_record's owner, killed
 SCRIPT = textwrap.dedent("""
     import os, signal, sys, time
     import rclpy
@@ -35,8 +38,7 @@ SCRIPT = textwrap.dedent("""
     from pmsm_sysid.rosutil import data_qos, make_sample_messages
     from pmsm_sysid.topics import INPUT_TYPES, input_topic
 
-    bag, ns, n, skip, mode = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), \\
-        sys.argv[5]
+    bag, ns, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
     ctx = Context()
     rclpy.init(context=ctx)
     node = Node("pub", context=ctx)
@@ -47,27 +49,59 @@ SCRIPT = textwrap.dedent("""
     print(rec._proc.pid, flush=True)
     while not all(p.get_subscription_count() for p in pubs.values()):
         time.sleep(0.01)
-    sent = 0
     for k in range(n):
-        if skip and k % skip == 3:
-            continue
         msgs = make_sample_messages(10**9 + k * 2_000_000, k, 2 * k, 3 * k)
         for s, p in pubs.items():
             p.publish(msgs[s])
-        sent += 1
-    while rec.samples_recorded < sent:  # everything is in the recorder's hands
+    while rec.samples_recorded < n:  # everything is in the recorder's hands
         time.sleep(0.01)
-    if mode == "kill":
-        os.kill(os.getpid(), signal.SIGKILL)
-    print(rec.stop())
+    os.kill(os.getpid(), signal.SIGKILL)
 """)
 
 
-def _run(tmp_path: Path, ros_env: int, bag: Path, ns: str, skip: int,
-         mode: str) -> subprocess.CompletedProcess[str]:
+def _publish_and_record(ctx: Any, bag: Path, ns: str,
+                        skip: int) -> tuple[dict[str, Any], int]:
+    """SCRIPT's owner in this process: N samples (every ``skip``-th one from the 4th on left
+    out when ``skip``) once the recorder has matched, then stop it when it holds them all;
+    the recorder's summary and the samples sent."""
+    from rclpy.node import Node
+
+    from pmsm_sysid.nodes.recorder_process import RecorderProcess
+    from pmsm_sysid.rosutil import data_qos, make_sample_messages
+    from pmsm_sysid.topics import INPUT_TYPES, input_topic
+
+    node = Node(f"pub_{uuid.uuid4().hex[:6]}", context=ctx)
+    first = make_sample_messages(0, 0, 0, 0)
+    pubs = {s: node.create_publisher(type(first[s]), input_topic(ns, s), data_qos())
+            for s in INPUT_TYPES}
+    rec = RecorderProcess(bag, namespace=ns, domain_id=ctx.get_domain_id())
+    try:
+        deadline = time.monotonic() + 120
+        while not all(p.get_subscription_count() for p in pubs.values()):
+            assert time.monotonic() < deadline, "the recorder never subscribed"
+            time.sleep(0.01)
+        sent = 0
+        for k in range(N):
+            if skip and k % skip == 3:
+                continue
+            msgs = make_sample_messages(10**9 + k * 2_000_000, k, 2 * k, 3 * k)
+            for s, p in pubs.items():
+                p.publish(msgs[s])
+            sent += 1
+        while rec.samples_recorded < sent:  # everything is in the recorder's hands
+            assert time.monotonic() < deadline, (rec.samples_recorded, sent)
+            time.sleep(0.01)
+        return rec.stop(), sent
+    finally:
+        rec.close()
+        node.destroy_node()
+
+
+def _run_killed(tmp_path: Path, ros_env: int, bag: Path,
+                ns: str) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "ROS_DOMAIN_ID": str(ros_env), "ROS_LOG_DIR": str(tmp_path / "log"),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "PYTHONPATH": str(REPO)}
-    return subprocess.run([sys.executable, "-c", SCRIPT, str(bag), ns, str(N), str(skip), mode],
+    return subprocess.run([sys.executable, "-c", SCRIPT, str(bag), ns, str(N)],
                           env=env, capture_output=True, text=True, timeout=300)
 
 
@@ -88,15 +122,12 @@ def _read(bag: Path) -> tuple[Counter[str], dict[str, list[int]]]:
 @pytest.mark.ros
 @pytest.mark.parametrize("skip", [0, 7], ids=["all", "every-7th-missing"])
 def test_counts_agree_with_the_bag_and_missing_samples_are_counted(
-        ros_env: int, tmp_path: Path, skip: int) -> None:
-    import ast
-
+        ros_context: Any, tmp_path: Path, skip: int) -> None:
     bag, ns = tmp_path / "bag", f"/r{uuid.uuid4().hex[:8]}"
-    proc = _run(tmp_path, ros_env, bag, ns, skip, "stop")
-    assert proc.returncode == 0, proc.stderr
-    summary: dict[str, Any] = ast.literal_eval(proc.stdout.strip().splitlines()[-1])
+    summary, published = _publish_and_record(ros_context, bag, ns, skip)
     counts, stamps = _read(bag)
     sent = sum(1 for k in range(N) if not (skip and k % skip == 3))
+    assert published == sent
     assert summary["messages"] == sum(counts.values()) == 3 * sent
     assert summary["topics"] == dict(counts)
     missing = N - sent - (1 if skip and (N - 1) % skip == 3 else 0)  # a trailing skip is unseen
@@ -110,7 +141,7 @@ def test_counts_agree_with_the_bag_and_missing_samples_are_counted(
 def test_owner_killed_the_recorder_finalises_the_bag_up_to_the_kill(
         ros_env: int, tmp_path: Path) -> None:
     bag, ns = tmp_path / "bag", f"/r{uuid.uuid4().hex[:8]}"
-    proc = _run(tmp_path, ros_env, bag, ns, 0, "kill")
+    proc = _run_killed(tmp_path, ros_env, bag, ns)
     assert proc.returncode == -9, proc.stderr
     # the recorder sees its owner gone, takes what waits, closes the bag and ends
     recorder_pid = int(proc.stdout.split()[0])

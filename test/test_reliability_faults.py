@@ -5,7 +5,9 @@ Recording: ``pmsm-sysid record`` runs as a separate process while this process p
 paced 500 Hz stream whose header stamps number the samples; after SIGINT/SIGTERM the bag,
 read by a stock ``rosbags`` AnyReader, must hold exactly the messages the recorder reports
 and they must be an unbroken prefix of the stream; after SIGKILL it must still be readable
-(no repair) and unbroken, missing at most about one flush interval.
+(no repair) and unbroken, missing at most about one flush interval. The three recordings,
+and the two ``run --record`` processes, each run side by side (module fixtures, a ROS
+domain each): they mostly wait for discovery, real time and the flushes.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ import sys
 import threading
 import time
 import uuid
+from collections.abc import Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -148,12 +152,43 @@ def _assert_unbroken_prefix(got: dict[str, list[int]], ns: str | None = None) ->
     return min(len(ks) for ks in got.values())
 
 
+#: seconds of samples committed before each signal
+RECORD_SIGNALS = {signal.SIGINT: 1.5, signal.SIGTERM: 1.5, signal.SIGKILL: 2.0}
+Recorded = tuple[subprocess.Popen[str], PacedStream, float, Path, int]
+
+
+def _record_on_a_domain_of_its_own(tmp: Path, sig: int) -> Recorded:
+    """:func:`_record_and_signal` with a private rclpy Context on a domain of its own."""
+    import rclpy
+    from rclpy.context import Context
+
+    from pmsm_sysid.testing.pytest_plugin import next_domain_id
+
+    domain, ctx = next_domain_id(), Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    try:
+        return _record_and_signal(ctx, tmp, domain, sig, RECORD_SIGNALS[sig])
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[int, Future[Recorded]]]:
+    """The three ``record`` processes and their streams, side by side (each on a domain of
+    its own, signalled by a thread of its own on its completion condition): they mostly
+    wait for discovery, the paced stream and the flushes."""
+    with ThreadPoolExecutor(len(RECORD_SIGNALS)) as pool:
+        yield {sig: pool.submit(_record_on_a_domain_of_its_own,
+                                tmp_path_factory.mktemp(signal.Signals(sig).name), sig)
+               for sig in RECORD_SIGNALS}
+
+
 @pytest.mark.ros
+@pytest.mark.xdist_group("record_signals")
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_record_stopped_by_a_signal_keeps_every_message_it_received(
-        ros_context: Any, ros_env: int, tmp_path: Path, sig: int) -> None:
-    recorder, stream, _, bag, committed = _record_and_signal(
-        ros_context, tmp_path, ros_env, sig, 1.5)
+        recordings: dict[int, Future[Recorded]], sig: int) -> None:
+    recorder, stream, _, bag, committed = recordings[sig].result(timeout=300)
     out, err = recorder.communicate(timeout=30)
     assert recorder.returncode == 0, err
     (summary,) = [ln for ln in out.splitlines() if ln.startswith("recorded ")]
@@ -169,12 +204,12 @@ def test_record_stopped_by_a_signal_keeps_every_message_it_received(
 
 
 @pytest.mark.ros
+@pytest.mark.xdist_group("record_signals")
 def test_record_hard_kill_leaves_a_readable_bag_missing_at_most_a_flush(
-        ros_context: Any, ros_env: int, tmp_path: Path) -> None:
+        recordings: dict[int, Future[Recorded]]) -> None:
     """SIGKILL: nothing runs at exit. The recorder commits every second (flush interval),
     so the bag is readable as it is and lacks at most the last second or so."""
-    recorder, stream, t_kill, bag, committed = _record_and_signal(
-        ros_context, tmp_path, ros_env, signal.SIGKILL, 2.0)
+    recorder, stream, t_kill, bag, committed = recordings[signal.SIGKILL].result(timeout=300)
     recorder.communicate(timeout=30)
     assert recorder.returncode == -signal.SIGKILL
     got = _recorded(bag)                         # stock reader, no repair
@@ -424,6 +459,7 @@ def test_identifier_publishes_diverged_models_as_strict_json(ros_context: Any) -
     from narx_systems import QUADRATIC, simulate, white_input
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
+    from rclpy.parameter import Parameter
     from std_msgs.msg import String
 
     from pmsm_sysid.core.online.engine import EngineConfig, OnlineEngine
@@ -455,7 +491,9 @@ def test_identifier_publishes_diverged_models_as_strict_json(ros_context: Any) -
     diverged = dataclasses.replace(result, models=(model,), validations=(val,))
 
     ns = f"/t{uuid.uuid4().hex[:10]}"
-    ident = IdentifierNode(context=ros_context, namespace=ns)
+    # nothing is fitted here (the result above is published directly): no worker process
+    ident = IdentifierNode(context=ros_context, namespace=ns, parameter_overrides=[
+        Parameter("fit_worker", value="thread")])
     listener = Node(f"listen_{uuid.uuid4().hex[:6]}", context=ros_context)
     got: dict[str, list[Any]] = {"model": [], "validation": []}
     listener.create_subscription(String, f"{ns}/model", lambda m: got["model"].append(m.data), 10)
@@ -507,33 +545,60 @@ def _flushed(bag: Path) -> int:
         return 0
 
 
-@pytest.mark.ros
-@pytest.mark.slow
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL], ids=["SIGINT", "SIGKILL"])
-def test_run_record_interrupted_or_killed(ros_env: int, tmp_path: Path, sig: int) -> None:
-    """``run --record``: Ctrl-C finalises the bag with every message recorded (the summary
-    says how many); a hard kill leaves a bag a stock reader opens as it is, holding at least
-    everything flushed before the kill, the input topics unbroken from their start.
-    (SIGTERM: ``test/test_run_cli.py``.)"""
-    import json
+#: the signals ``run --record`` gets (SIGTERM: test_run_cli.py)
+RUN_RECORD = (signal.SIGINT, signal.SIGKILL)
 
-    bag, out = tmp_path / "live", tmp_path / "run.json"
+
+def _run_record_and_signal(domain: int, tmp: Path, sig: int) -> tuple[int, str, Path, Path, int]:
+    """``run --record`` signalled once 2500 messages are flushed to the bag: exit code,
+    stderr, the bag, the summary JSON and the messages flushed before the signal."""
+    bag, out = tmp / "live", tmp / "run.json"
     proc = subprocess.Popen([sys.executable, "-m", "pmsm_sysid.cli", "run", "--record",
                              str(bag), "--json", str(out), "--nodes", "sim,identifier",
                              "--outputs", "speed"],
-                            env=_env(ros_env, tmp_path), stdout=subprocess.PIPE,
+                            env=_env(domain, tmp), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and _flushed(bag) < 2500:
             assert proc.poll() is None, proc.communicate()
-            time.sleep(0.1)
+            time.sleep(0.05)
         flushed = _flushed(bag)
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             proc.kill()
+            proc.communicate()
+    return proc.returncode, err, bag, out, flushed
+
+
+@pytest.fixture(scope="module")
+def run_records(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[int, Future[Any]]]:
+    """Both ``run --record`` processes, started side by side (each on a ROS domain of its
+    own, signalled by a thread of its own on its completion condition): they mostly wait
+    for discovery, real time and the flushes."""
+    from pmsm_sysid.testing.pytest_plugin import next_domain_id
+
+    with ThreadPoolExecutor(len(RUN_RECORD)) as pool:
+        yield {sig: pool.submit(_run_record_and_signal, next_domain_id(),
+                                tmp_path_factory.mktemp(signal.Signals(sig).name), sig)
+               for sig in RUN_RECORD}
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+@pytest.mark.xdist_group("run_record")
+@pytest.mark.parametrize("sig", list(RUN_RECORD), ids=["SIGINT", "SIGKILL"])
+def test_run_record_interrupted_or_killed(run_records: dict[int, Future[Any]],
+                                          sig: int) -> None:
+    """``run --record``: Ctrl-C finalises the bag with every message recorded (the summary
+    says how many); a hard kill leaves a bag a stock reader opens as it is, holding at least
+    everything flushed before the kill, the input topics unbroken from their start.
+    (SIGTERM: ``test/test_run_cli.py``.)"""
+    import json
+
+    returncode, err, bag, out, flushed = run_records[sig].result(timeout=300)
     assert "Traceback" not in err
     with AnyReader([bag]) as reader:  # plain rosbags, no repair
         stamps: dict[str, list[int]] = {}
@@ -552,8 +617,8 @@ def test_run_record_interrupted_or_killed(ros_env: int, tmp_path: Path, sig: int
     assert len({ts[0] for ts in stamps.values()}) == 1
     assert max(map(len, stamps.values())) - min(map(len, stamps.values())) <= 1
     if sig == signal.SIGKILL:
-        assert proc.returncode == -signal.SIGKILL
+        assert returncode == -signal.SIGKILL
         return
-    assert proc.returncode == 0, err
+    assert returncode == 0, err
     s = json.loads(out.read_text())
     assert s["stopped_by_signal"] is True and s["recorded_messages"] == total

@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -13,14 +10,8 @@ import pytest
 from pmsm_sysid.core.errors import PmsmSysidError
 from pmsm_sysid.rosargs import check_ros_args, prepared, split_ros_args
 
-CLI = [sys.executable, "-m", "pmsm_sysid.cli"]
-RUN = [*CLI, "run", "--nodes", "sim,identifier", "--outputs", "speed", "--clock", "sim",
+RUN = ["run", "--nodes", "sim,identifier", "--outputs", "speed", "--clock", "sim",
        "--duration", "4", "--json", "-"]
-
-
-def _env(domain: int, tmp: Path) -> dict[str, str]:
-    return dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-                ROS_LOG_DIR=str(tmp / "ros_log"))
 
 
 def test_split_keeps_the_verbs_options_and_hands_the_rest_to_ros() -> None:
@@ -63,16 +54,19 @@ def test_bad_ros_args_are_found_before_any_work(args: list[str], match: str) -> 
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_a_params_file_sets_the_identifiers_hop(ros_env: int, tmp_path: Path) -> None:
+def test_a_params_file_sets_the_identifiers_hop(ros_env: int, tmp_path: Path,
+                                                capfd: pytest.CaptureFixture[str]) -> None:
     """The same 4 s of data: hop 250 (default) fits 4 windows, hop 125 from the params file
-    8, and ``-p`` after it wins (hop 500: 2); the verb's own --hop wins over both."""
+    8, and ``-p`` after it wins (hop 500: 2); the verb's own --hop wins over both. Each run
+    is ``main`` in this process (a context of its own, parsed from its ``--ros-args``): the
+    arguments are what is checked, not the process."""
+    from reliability_helpers import ros_verb
+
     params = tmp_path / "params.yaml"
     params.write_text("pmsm_identifier:\n  ros__parameters:\n    hop: 125\n")
-    env = _env(ros_env, tmp_path)
 
     def fitted(*extra: str) -> tuple[int, int]:
-        proc = subprocess.run([*RUN, *extra], env=env, capture_output=True, text=True,
-                              timeout=300)
+        proc = ros_verb(capfd, *RUN, *extra)
         assert proc.returncode == 0, proc.stderr
         s = json.loads(proc.stdout)
         assert s["samples_received"] == 2000 and s["windows_skipped"] == 0
@@ -85,14 +79,17 @@ def test_a_params_file_sets_the_identifiers_hop(ros_env: int, tmp_path: Path) ->
 
 
 @pytest.mark.ros
-def test_ros_args_errors_are_one_line_and_exit_2(ros_env: int, tmp_path: Path) -> None:
-    env = _env(ros_env, tmp_path)
+def test_ros_args_errors_are_one_line_and_exit_2(ros_env: int, tmp_path: Path,
+                                                 capfd: pytest.CaptureFixture[str]) -> None:
+    """Refused before any work: in this process (reliability_helpers.ros_verb)."""
+    from reliability_helpers import ros_verb
+
     for argv, match in (
-            ([*CLI, "run", "--ros-args", "--params-file", str(tmp_path / "none.yaml")],
+            (["run", "--ros-args", "--params-file", str(tmp_path / "none.yaml")],
              "no such file"),
-            ([*CLI, "monitor", "--once", "--ros-args", "-r", "nonsense"], "name:=value"),
-            ([*CLI, "identify", "x.bag", "--ros-args", "-p", "a:=1"], "ROS verbs only")):
-        proc = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=120)
+            (["monitor", "--once", "--ros-args", "-r", "nonsense"], "name:=value"),
+            (["identify", "x.bag", "--ros-args", "-p", "a:=1"], "ROS verbs only")):
+        proc = ros_verb(capfd, *argv)
         lines = proc.stderr.strip().splitlines()
         assert proc.returncode == 2 and len(lines) == 1 and match in lines[0], proc.stderr
 

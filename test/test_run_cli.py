@@ -1,4 +1,7 @@
-"""``pmsm-sysid run`` as a user runs it: summary JSON, clean SIGTERM, one-line errors."""
+"""``pmsm-sysid run`` as a user runs it: summary JSON, clean SIGTERM, one-line errors.
+
+The two runs are processes started side by side by one module fixture (the five-second run
+mostly waits for real time); the refused inputs are checked in this process."""
 
 from __future__ import annotations
 
@@ -8,6 +11,9 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,10 +30,40 @@ def _env(ros_env: int, tmp_path: Path) -> dict[str, str]:
             "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "ROS_LOG_DIR": str(tmp_path / "log")}
 
 
+@dataclass(frozen=True)
+class Runs:
+    """The module's two runs, started side by side (each on a ROS domain of its own): the
+    five-second run mostly waits for real time, which the other run uses."""
+
+    five_seconds: subprocess.Popen[str]
+    sigterm: Future[tuple[int, str, Path, Path]]  # exit code, stderr, bag, summary JSON
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Runs]:
+    from pmsm_sysid.testing.pytest_plugin import next_domain_id
+
+    tmp = tmp_path_factory.mktemp("runs")
+    (tmp / "five").mkdir()
+    (tmp / "sigterm").mkdir()
+    five = subprocess.Popen([*CLI, "run", "--duration", "5", "--json", "-"],
+                            env=_env(next_domain_id(), tmp / "five"), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    with ThreadPoolExecutor(1) as pool:
+        try:
+            yield Runs(five, pool.submit(_sigterm_mid_run, next_domain_id(), tmp / "sigterm"))
+        finally:
+            if five.poll() is None:
+                five.kill()
+                five.communicate()
+
+
 @pytest.mark.slow
-def test_run_for_five_seconds_prints_the_summary(ros_env: int, tmp_path: Path) -> None:
-    proc = subprocess.run([*CLI, "run", "--duration", "5", "--json", "-"], env=_env(
-        ros_env, tmp_path), capture_output=True, text=True, timeout=180)
+@pytest.mark.xdist_group("run_cli")
+def test_run_for_five_seconds_prints_the_summary(runs: Runs) -> None:
+    stdout, stderr = runs.five_seconds.communicate(timeout=180)
+    proc = subprocess.CompletedProcess(runs.five_seconds.args, runs.five_seconds.returncode,
+                                       stdout, stderr)
     assert proc.returncode == 0, proc.stderr
     s = json.loads(proc.stdout)
     assert set(s) >= KEYS
@@ -50,29 +86,37 @@ def test_run_for_five_seconds_prints_the_summary(ros_env: int, tmp_path: Path) -
     assert set(s["verdict"]["windows"]) <= {"speed", "position"}
 
 
-@pytest.mark.slow
-def test_sigterm_mid_run_finalises_the_recording(ros_env: int, tmp_path: Path) -> None:
-    from rosbags.highlevel import AnyReader
-
-    from pmsm_sysid.bagio import read_recording
-
+def _sigterm_mid_run(domain: int, tmp_path: Path) -> tuple[int, str, Path, Path]:
+    """``run --record`` sent SIGTERM once at least 1000 samples and two models are committed
+    to the bag."""
     bag, out = tmp_path / "live", tmp_path / "run.json"
     proc = subprocess.Popen([*CLI, "run", "--record", str(bag), "--json", str(out)],
-                            env=_env(ros_env, tmp_path), stdout=subprocess.PIPE,
+                            env=_env(domain, tmp_path), stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 120
-        # stop once at least 1000 samples and two models are committed to the bag
         while time.monotonic() < deadline and not (_recorded(bag) > 3000
                                                    and _recorded(bag, "/pmsm/model") >= 2):
-            time.sleep(0.5)
+            time.sleep(0.05)
         assert proc.poll() is None, proc.communicate()
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode == 0, err
+            proc.communicate()
+    return proc.returncode, err, bag, out
+
+
+@pytest.mark.slow
+@pytest.mark.xdist_group("run_cli")
+def test_sigterm_mid_run_finalises_the_recording(runs: Runs) -> None:
+    from rosbags.highlevel import AnyReader
+
+    from pmsm_sysid.bagio import read_recording
+
+    returncode, err, bag, out = runs.sigterm.result(timeout=300)
+    assert returncode == 0, err
     assert "Traceback" not in err
     s = json.loads(out.read_text())
     assert s["stopped_by_signal"] is True and set(s) >= KEYS
@@ -114,21 +158,25 @@ def _recorded(bag: Path, topic: str | None = None) -> int:
     (["--set", "identifier.windw=5", "--duration", "1"], "no parameter"),
     (["--set", "cogging.enabled=true"], "NODE.PARAM=VALUE"),
 ])
-def test_bad_input_is_one_line_and_exit_2(ros_env: int, tmp_path: Path, argv: list[str],
-                                          match: str) -> None:
-    proc = subprocess.run([*CLI, "run", *argv], env=_env(ros_env, tmp_path),
-                          capture_output=True, text=True, timeout=120)
+def test_bad_input_is_one_line_and_exit_2(ros_env: int, capfd: pytest.CaptureFixture[str],
+                                          argv: list[str], match: str) -> None:
+    """Refused before any work, so run in this process (reliability_helpers.ros_verb);
+    stderr as captured at the descriptor, rcl's own output included."""
+    from reliability_helpers import ros_verb
+
+    proc = ros_verb(capfd, "run", *argv)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and match in lines[0] and "Traceback" not in proc.stderr
 
 
-def test_existing_record_path_is_refused(ros_env: int, tmp_path: Path) -> None:
+def test_existing_record_path_is_refused(ros_env: int, tmp_path: Path,
+                                         capfd: pytest.CaptureFixture[str]) -> None:
+    from reliability_helpers import ros_verb
+
     bag = tmp_path / "bag"
     bag.mkdir()
-    proc = subprocess.run([*CLI, "run", "--record", str(bag), "--duration", "1"],
-                          env=_env(ros_env, tmp_path), capture_output=True, text=True,
-                          timeout=120)
+    proc = ros_verb(capfd, "run", "--record", str(bag), "--duration", "1")
     assert proc.returncode == 2 and "exists" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
 
