@@ -108,7 +108,7 @@ def _block_ros() -> None:
 @pytest.hookimpl(trylast=True)  # after pytest-xdist has named each test's group
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Modules with ``slow`` tests first, each module's tests kept together (module fixtures
-    are made once) and in order, so that the two test processes get the long tests early
+    are made once) and in order, so that the test processes get the long tests early
     and finish together; with ``--without-ros``, the ``ros`` tests are deselected. Under
     ``--dist loadgroup`` a test of an ``xdist_group`` that did not get its group (a pytest
     that pytest-xdist cannot group with) fails: the group's shared runs would be made once
