@@ -68,7 +68,7 @@ def _ar_whitener(e: FloatArray, max_order: int) -> FloatArray:
 def _yule_walker(r: FloatArray, p: int) -> FloatArray:
     """``solve_toeplitz(r[:p], r[1:p + 1])`` for finite ``r``, by the Levinson recursion
     that function runs, without its argument checks: the same numbers, bit for bit
-    (test_plantfit_stats checks it); measured: the checks were 70 % of its time, called
+    (test_plantfit_speed checks it); measured: the checks were 70 % of its time, called
     20 times for each residual whitened."""
     vals = np.concatenate((r[p - 1:0:-1], r[:p]))
     return np.asarray(levinson(vals, np.ascontiguousarray(r[1:p + 1]))[0])
