@@ -26,7 +26,7 @@ OFFLINE = ("simulate", "identify", "gfrf", "diagnose", "fit-plant", "report", "i
 
 
 @contextmanager
-def _environment(env: Mapping[str, str] | None, cwd: Path | str | None) -> Iterator[None]:
+def environment(env: Mapping[str, str] | None, cwd: Path | str | None) -> Iterator[None]:
     """``env`` as the whole environment and ``cwd`` as the working directory, for the
     call only (as ``subprocess.run(env=, cwd=)`` would give the process)."""
     saved, here = dict(os.environ), os.getcwd()
@@ -44,7 +44,7 @@ def _environment(env: Mapping[str, str] | None, cwd: Path | str | None) -> Itera
 
 
 @contextmanager
-def _warnings_as_a_process() -> Iterator[None]:
+def warnings_as_a_process() -> Iterator[None]:
     """Warnings filtered as a fresh interpreter filters them and printed on ``sys.stderr``
     (pytest otherwise records them out of sight, and each is shown once per place
     per test process, not per call): an extra line a process would print is seen."""
@@ -63,6 +63,15 @@ def _warnings_as_a_process() -> Iterator[None]:
         yield
 
 
+def exit_status(*args: str) -> int:
+    """``pmsm_sysid.cli.main(ARGS)`` here: its exit status, argparse's usage errors and
+    ``--help`` (a ``SystemExit``) included."""
+    try:
+        return main(list(args))
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+
+
 def invoke(*args: str, env: Mapping[str, str] | None = None,
            cwd: Path | str | None = None) -> subprocess.CompletedProcess[str]:
     """Run ``pmsm-sysid ARGS`` (an offline verb) here; the result as ``subprocess.run``
@@ -72,11 +81,8 @@ def invoke(*args: str, env: Mapping[str, str] | None = None,
     verb = next((a for a in args if not a.startswith("-")), "")
     assert verb in OFFLINE, f"{verb!r} is not an offline verb: run it as a process"
     out, err = io.StringIO(), io.StringIO()
-    with _environment(env, cwd), redirect_stdout(out), redirect_stderr(err), \
-            _warnings_as_a_process():
-        try:
-            code = main(list(args))
-        except SystemExit as exc:  # argparse: usage errors and --help
-            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    with environment(env, cwd), redirect_stdout(out), redirect_stderr(err), \
+            warnings_as_a_process():
+        code = exit_status(*args)
     return subprocess.CompletedProcess(["pmsm-sysid", *args], code, out.getvalue(),
                                        err.getvalue())

@@ -6,16 +6,14 @@ tests of run, record, replay and monitor where the process is not what they chec
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-import sys
 import warnings
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from cli_inprocess import invoke
+from cli_inprocess import environment, exit_status, invoke, warnings_as_a_process
 from narx_systems import QUADRATIC, simulate, white_input
 from rosbags.rosbag2 import Writer
 
@@ -46,26 +44,8 @@ def ros_verb(capfd: Any, *args: str) -> subprocess.CompletedProcess[str]:
     user's process, runs as a process (one costs a Python, rclpy, numpy and scipy: about
     1.5 s of CPU, and a fork server of its own)."""
     capfd.readouterr()
-    saved = dict(os.environ)
-
-    def show(message: Warning | str, category: type[Warning], filename: str, lineno: int,
-             file: object = None, line: str | None = None) -> None:
-        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("default")
-            for category in (ResourceWarning, ImportWarning, PendingDeprecationWarning,
-                             DeprecationWarning):
-                warnings.filterwarnings("ignore", category=category)
-            warnings.showwarning = show
-            try:
-                code = main(list(args))
-            except SystemExit as exc:  # argparse: usage errors
-                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-    finally:
-        os.environ.clear()
-        os.environ.update(saved)
+    with environment(None, None), warnings_as_a_process():
+        code = exit_status(*args)
     out, err = capfd.readouterr()
     return subprocess.CompletedProcess(["pmsm-sysid", *args], code, out, err)
 

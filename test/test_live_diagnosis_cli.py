@@ -8,11 +8,11 @@ import json
 import os
 import subprocess
 import sys
-import warnings
 from pathlib import Path
 from typing import Any
 
 import pytest
+from reliability_helpers import ros_verb
 
 pytestmark = pytest.mark.ros
 CLI = [sys.executable, "-m", "pmsm_sysid.cli"]
@@ -34,20 +34,13 @@ def _env(ros_env: int, tmp_path: Path) -> dict[str, str]:
 ])
 def test_a_bad_reference_is_one_line_and_exit_2(args: list[str], match: str, ros_env: int,
                                                 tmp_path: Path,
-                                                capsys: pytest.CaptureFixture[str]) -> None:
-    from pmsm_sysid.cli import main
-
+                                                capfd: pytest.CaptureFixture[str]) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text("mass_kg: 2.0\nwheels: 4\n")
-    argv = ["run", "--clock", "sim", "--duration", "1",
-            *[a.replace("{plant}", str(bad)) for a in args]]
-    with warnings.catch_warnings():  # a process would print it: one more line
-        warnings.simplefilter("error", RuntimeWarning)
-        try:
-            code = main(argv)
-        except SystemExit as exc:  # argparse's own errors
-            code = exc.code
-    out, err = capsys.readouterr()
+    # in this process; a warning is printed as a process prints it: one more line
+    proc = ros_verb(capfd, "run", "--clock", "sim", "--duration", "1",
+                    *[a.replace("{plant}", str(bad)) for a in args])
+    code, out, err = proc.returncode, proc.stdout, proc.stderr
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1 and match in lines[0], err
     assert "running" not in err and not out
