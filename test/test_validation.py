@@ -176,3 +176,25 @@ def test_the_binomial_limits_are_scipy_stats_quantiles() -> None:
             want = float(stats.binom.sf(failed - 1, made, NULL_RATE))
             got = window_rate(made - failed, made)["p_value"]
             assert got == pytest.approx(want, rel=1e-9, abs=1e-300)
+
+
+def test_the_input_limits_are_the_count_limits_of_each_input_and_shared_by_residuals() -> None:
+    """The count limits of ue, u2e and u2e2 follow the input's autocorrelation only: they
+    are computed once per input and reused for other residuals on the same input (the
+    speed and position models of one window). Each equals the limit computed directly
+    from that input's autocorrelation, and another input gets its own."""
+    from pmsm_sysid.core.validation.correlation import _acf, _count_limit
+
+    rng = np.random.default_rng(11)
+    k = np.arange(1000)
+    lags = np.arange(-20, 21, dtype=np.intp)
+    for u in (np.sin(2 * np.pi * 0.02 * k) + 0.05 * rng.standard_normal(1000),
+              np.sign(np.sin(2 * np.pi * 0.007 * k)) + 0.3 * rng.standard_normal(1000)):
+        uc, u2 = u - u.mean(), u * u - np.mean(u * u)
+        k_u, k_u2 = (_count_limit(41, _acf(a, 40), lags) for a in (uc, u2))
+        assert k_u > 6  # coloured: more than the binomial limit of 41 white lags
+        for _ in range(2):
+            ct = correlation_tests(rng.standard_normal(1000), u)
+            assert (ct.ue.max_outside, ct.u2e.max_outside, ct.u2e2.max_outside) \
+                == (k_u, k_u2, k_u2)
+            assert ct.ee.max_outside == 4 and ct.e_eu.max_outside == 4  # binomial, 20/21 lags

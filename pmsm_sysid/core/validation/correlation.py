@@ -220,11 +220,23 @@ def _acf(a: FloatArray, max_shift: int) -> FloatArray | None:
     return acf
 
 
-def _judge(
-    name: str, lags: IntArray, values: FloatArray, n: int, acf: FloatArray | None = None
-) -> CorrelationTest:
+@lru_cache(maxsize=16)
+def _input_limits(uc: bytes, u2: bytes, max_lag: int) -> tuple[int, int]:
+    """The count limits of ``ue`` and of ``u2e``/``u2e2`` (two-sided lags) for the input u'
+    and (u^2)' given as float64 bytes. They depend on the input alone, and the tests of
+    the speed and the position model of one window share it: computed once per input."""
+    two_sided = np.arange(-max_lag, max_lag + 1, dtype=np.intp)
+    limits = (_count_limit(len(two_sided), _acf(np.frombuffer(a), 2 * max_lag), two_sided)
+              for a in (uc, u2))
+    return next(limits), next(limits)
+
+
+def _judge(name: str, lags: IntArray, values: FloatArray, n: int,
+           k_max: int | None = None) -> CorrelationTest:
+    """The verdict of one test; ``k_max`` the count limit when the null values at
+    different lags are correlated, else the binomial limit for ``lags``."""
     band = 1.96 / float(np.sqrt(n))
-    k_max = _count_limit(len(lags), acf, lags)
+    k_max = _binomial_limit(len(lags)) if k_max is None else k_max
     v_max = _max_limit(len(lags)) / float(np.sqrt(n))
     max_abs = float(np.max(np.abs(values))) if len(values) else 0.0
     n_out = int(np.count_nonzero(np.abs(values) > band))
@@ -258,12 +270,12 @@ def correlation_tests(residuals: FloatArray, u: FloatArray, max_lag: int = 20) -
     two_sided = np.arange(-max_lag, max_lag + 1, dtype=np.intp)
     pos = np.arange(1, max_lag + 1, dtype=np.intp)
     nonneg = np.arange(0, max_lag + 1, dtype=np.intp)
-    acf_u, acf_u2 = _acf(uc, 2 * max_lag), _acf(u2, 2 * max_lag)
+    k_u, k_u2 = _input_limits(uc.tobytes(), u2.tobytes(), max_lag)
     return CorrelationTests(
         ee=_judge("ee", pos, xcorr(ec, ec, pos), n),
-        ue=_judge("ue", two_sided, xcorr(uc, ec, two_sided), n, acf_u),
-        u2e=_judge("u2e", two_sided, xcorr(u2, ec, two_sided), n, acf_u2),
-        u2e2=_judge("u2e2", two_sided, xcorr(u2, e2, two_sided), n, acf_u2),
+        ue=_judge("ue", two_sided, xcorr(uc, ec, two_sided), n, k_u),
+        u2e=_judge("u2e", two_sided, xcorr(u2, ec, two_sided), n, k_u2),
+        u2e2=_judge("u2e2", two_sided, xcorr(u2, e2, two_sided), n, k_u2),
         # e(k) against e(k-1-tau)u(k-1-tau): a = (eu)', b = e' at lag 1 + tau
         e_eu=_judge("e_eu", nonneg, xcorr(eu, ec, nonneg + 1), n),
     )
