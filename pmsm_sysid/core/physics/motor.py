@@ -42,14 +42,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import DataError, PlantError
 from ..recording.signals import Recording
+from .integrator import Rk4, effect_function
 from .plant import Plant, plant_to_dict
 
 FloatArray = NDArray[np.float64]
 
-_MAX_FINE_STEPS = 64
 MAX_SUBSTEPS = 4096
-_NEAR_ZERO_HLAMBDA = 0.2
 _HISTORY_MIN = 1024
+#: most normals a noise stream draws at once (:class:`Normals`)
+NOISE_BLOCK = 4096
 
 
 def _effects(plant: Plant, x: Any, v: Any, f: Any,
@@ -146,9 +147,9 @@ class MotorSimulator:
         if not (math.isfinite(x0) and math.isfinite(v0)):
             raise PlantError(f"initial state must be finite, got x0={x0}, v0={v0}")
         meas_seq, force_seq, thrust_seq = np.random.SeedSequence(int(seed)).spawn(3)
-        self._rng_meas = np.random.Generator(np.random.PCG64(meas_seq))
-        self._rng_force = np.random.Generator(np.random.PCG64(force_seq))
-        self._rng_thrust = np.random.Generator(np.random.PCG64(thrust_seq))
+        self._meas_noise, self._force_noise, self._thrust_noise = (
+            Normals(np.random.Generator(np.random.PCG64(s)))
+            for s in (meas_seq, force_seq, thrust_seq))
         self._zt = 0.0
         self._x, self._v, self._f = float(x0), float(v0), 0.0
         self._k = 0
@@ -206,11 +207,19 @@ class MotorSimulator:
         u = float(thrust)
         if not math.isfinite(u):
             raise DataError(f"thrust at sample {self._k} is not finite ({thrust})")
-        self._history.append(u)
-        w_std = self._plant.noise.force_std if self._plant.noise is not None else 0.0
-        w = w_std * float(self._rng_force.standard_normal())
-        for duration, cmd in self._segments():
-            self._integrate(duration, cmd, w)
+        history = self._history
+        history.append(u)
+        w = self._w_std * self._force_noise.draw()
+        m, r = self._delay_m, self._delay_r
+        x, v, f, run = self._x, self._v, self._f, self._rk4.run
+        if r == 0.0:
+            x, v, f = run(x, v, f, self._period, history[-1 - m] if m < len(history) else 0.0,
+                          w)
+        else:
+            x, v, f = run(x, v, f, r, history[-2 - m] if m + 1 < len(history) else 0.0, w)
+            x, v, f = run(x, v, f, self._period - r,
+                          history[-1 - m] if m < len(history) else 0.0, w)
+        self._x, self._v, self._f = x, v, f
         self._k += 1
         self._z = self._draw_measurement()
 
@@ -247,103 +256,45 @@ class MotorSimulator:
         self._delay_r = 0.0 if frac <= 1e-9 * period else frac
         if m + 2 > (self._history.maxlen or 0):
             self._history = deque(self._history, maxlen=m + 2)
-        lag = plant.thrust_lag
-        self._tau = lag.tau_s if lag is not None else 0.0
-        self._inv_m = 1.0 / plant.mass_kg
-        self._b = plant.viscous_n_per_mps
         scales = [blk.smoothing_mps for blk in (plant.coulomb_friction, plant.stribeck_friction)
                   if blk is not None]
-        self._smoothing = min(scales) if scales else 0.0
-        self._fric_rate = friction_rate(plant)
+        self._rk4 = Rk4(plant, self._h, effect_function(plant), min(scales) if scales else 0.0,
+                        friction_rate(plant))
+        self._period = period
+        self._w_std = plant.noise.force_std if plant.noise is not None else 0.0
 
     def _draw_measurement(self) -> tuple[float, float]:
-        self._zt = float(self._rng_thrust.standard_normal())
-        z = self._rng_meas.standard_normal(2)
-        return float(z[0]), float(z[1])
+        self._zt = self._thrust_noise.draw()
+        meas = self._meas_noise
+        return meas.draw(), meas.draw()
 
     def _command(self, back: int) -> float:
         """The command ``back`` samples before the newest (0 before the start)."""
         return self._history[-1 - back] if back < len(self._history) else 0.0
 
-    def _segments(self) -> list[tuple[float, float]]:
-        """(duration, command) pieces of this sample period after the transport delay."""
-        period = self._plant.sample_period_s
-        m, r = self._delay_m, self._delay_r
-        if r == 0.0:
-            return [(period, self._command(m))]
-        return [(r, self._command(m + 1)), (period - r, self._command(m))]
 
-    def _integrate(self, duration: float, cmd: float, w: float) -> None:
-        steps = max(1, math.ceil(duration / self._h - 1e-9))
-        h = duration / steps
-        x, v = self._x, self._v
-        f = self._f if self._tau > 0 else cmd
-        smooth = self._smoothing
-        for _ in range(steps):
-            a1 = self._accel(x, v, f, w)
-            if smooth > 0.0:
-                dv = h * (a1 - (f - cmd) * self._inv_m) + self._lag_impulse(f - cmd, h)
-                fine = _fine_steps(v, dv, smooth, h * self._fric_rate)
-                if fine > 1:
-                    for _ in range(fine):
-                        x, v, f = self._rk4(x, v, f, h / fine, cmd, w, None)
-                    continue
-            x, v, f = self._rk4(x, v, f, h, cmd, w, a1)
-        self._x, self._v, self._f = x, v, f
+class Normals:
+    """Standard normals of one generator, one per :meth:`draw`: the numbers and the order
+    of ``float(rng.standard_normal())`` per draw, taken from blocks the generator fills
+    value by value (a block of n is the next n single draws), far cheaper per value.
+    Blocks grow from 16 to :data:`NOISE_BLOCK` values, so a short simulation draws few."""
 
-    def _accel(self, x: float, v: float, f: float, w: float) -> float:
-        eff = float(_effects(self._plant, x, v, f, math.sin, math.exp, math.tanh))
-        return (f + w - self._b * v - eff) * self._inv_m
+    __slots__ = ("_buf", "_i", "_rng", "_size")
 
-    def _lag_impulse(self, d: float, s: float) -> float:
-        """phi(s): speed response of the damped mass to the lag transient d exp(-t/tau).
+    def __init__(self, rng: np.random.Generator) -> None:
+        self._rng = rng
+        self._buf: list[float] = []
+        self._i = 0
+        self._size = 16
 
-        phi' = -(B/M) phi + d exp(-t/tau)/M, phi(0) = 0, in closed form.
-        """
-        if d == 0.0 or self._tau <= 0.0:
-            return 0.0
-        lam = self._b * self._inv_m
-        kappa = 1.0 / self._tau - lam
-        shape = s if abs(kappa * s) < 1e-300 else -math.expm1(-kappa * s) / kappa
-        return d * self._inv_m * math.exp(-lam * s) * shape
-
-    def _rk4(self, x: float, v: float, f: float, h: float, cmd: float, w: float,
-             a1: float | None) -> tuple[float, float, float]:
-        """One RK4 step of (x, v) with the lag force F(t) = cmd + d exp(-t/tau) exact.
-
-        The linear response phi(t) of the damper to the lag transient is taken in closed
-        form and RK4 integrates the rest (it carries v - phi), so only smooth terms meet the
-        quadrature and a lag of any length costs no accuracy. Without a lag d = 0 and this
-        is classic RK4.
-        """
-        d = f - cmd
-        decay_half = math.exp(-0.5 * h / self._tau) if self._tau > 0 else 0.0
-        f_mid = cmd + d * decay_half
-        f_end = cmd + d * decay_half * decay_half
-        phi_mid, phi_end = self._lag_impulse(d, 0.5 * h), self._lag_impulse(d, h)
-        inv_m, lam = self._inv_m, self._b * self._inv_m
-        mid_fix = lam * phi_mid - (f_mid - cmd) * inv_m
-        k1 = (self._accel(x, v, f, w) if a1 is None else a1) - d * inv_m
-        v2 = v + 0.5 * h * k1 + phi_mid
-        k2 = self._accel(x + 0.5 * h * v, v2, f_mid, w) + mid_fix
-        v3 = v + 0.5 * h * k2 + phi_mid
-        k3 = self._accel(x + 0.5 * h * v2, v3, f_mid, w) + mid_fix
-        v4 = v + h * k3 + phi_end
-        k4 = self._accel(x + h * v3, v4, f_end, w) + lam * phi_end - (f_end - cmd) * inv_m
-        x_new = x + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
-        v_new = v + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4) + phi_end
-        return x_new, v_new, f_end
-
-
-def _fine_steps(v: float, dv: float, smoothing: float, h_rate: float) -> int:
-    """Sub-steps for a step near the sign(v) transition (within 5 smoothing scales, or
-    crossing v = 0): pieces that change v by at most one smoothing scale and keep
-    h * (friction rate) <= 0.2, where the smoothed friction is stiff."""
-    v_end = v + dv
-    if min(abs(v), abs(v_end)) > 5.0 * smoothing and v * v_end > 0:
-        return 1
-    need = max(abs(dv) / smoothing, h_rate / _NEAR_ZERO_HLAMBDA)
-    return min(_MAX_FINE_STEPS, max(1, math.ceil(need)))
+    def draw(self) -> float:
+        i = self._i
+        if i == len(self._buf):
+            size = min(self._size, NOISE_BLOCK)
+            self._buf, i = self._rng.standard_normal(size).tolist(), 0
+            self._size = 2 * size
+        self._i = i + 1
+        return self._buf[i]
 
 
 def _quantise(value: float, step: float) -> float:
@@ -364,18 +315,20 @@ def _run(sim: MotorSimulator, plant: Plant, u: FloatArray, seed: int, k0: int,
          t0: float) -> Recording:
     """Samples ``k0 ..`` of a simulation: measure, record the thrust, advance; per sample."""
     n = len(u)
-    speed = np.empty(n)
-    position = np.empty(n)
-    recorded = np.empty(n)
-    for k in range(n):
-        speed[k], position[k] = sim.measure()
-        recorded[k] = sim.measured_thrust(u[k])
-        sim.advance(u[k])
+    measured = []
+    recorded = []
+    measure, thrust_reading, advance = sim.measure, sim.measured_thrust, sim.advance
+    for uk in u.tolist():  # Python floats: the same values, cheaper per sample than numpy's
+        measured.append(measure())
+        recorded.append(thrust_reading(uk))
+        advance(uk)
     fs = plant.sample_rate_hz
     meta = {"plant": json.dumps(plant_to_dict(plant), sort_keys=True), "seed": str(seed),
             "simulator": "pmsm_sysid.core.physics.motor"}
-    return Recording(t=t0 + (k0 + np.arange(n)) / fs, thrust=recorded, speed=speed,
-                     position=position, sample_rate_hz=fs, source="simulate", meta=meta)
+    speed, position = np.array(measured, dtype=np.float64).reshape(n, 2).T
+    return Recording(t=t0 + (k0 + np.arange(n)) / fs, thrust=np.array(recorded, dtype=np.float64),
+                     speed=speed.copy(), position=position.copy(), sample_rate_hz=fs,
+                     source="simulate", meta=meta)
 
 
 def simulate(plant: Plant, thrust: ArrayLike, seed: int = 0, x0: float = 0.0, v0: float = 0.0,
