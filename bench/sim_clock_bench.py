@@ -8,7 +8,13 @@ run and its worker processes (main process and workers apart, from the run's own
 and the machine's load average at the start: other work on a shared machine slows the run
 and is printed with it. Every window must be fitted (none skipped) for a run to count.
 
-Usage: ``python bench/sim_clock_bench.py [--duration 60] [--repeat 3] [--json FILE]``.
+With ``--baseline DIR`` (another checkout of the package, e.g. ``git worktree add /tmp/base
+main``) the runs alternate between that code and this one (same interpreter and
+dependencies, the package taken from DIR through PYTHONPATH), and the medians of both are
+printed: on a shared machine only interleaved runs compare.
+
+Usage: ``python bench/sim_clock_bench.py [--duration 60] [--repeat 3] [--baseline DIR]
+[--json FILE]``.
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ import argparse
 import json
 import os
 import resource
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -55,29 +62,44 @@ def one_run(duration: float, env: dict[str, str]) -> dict[str, Any]:
             "load_avg_1min": load}
 
 
+def _line(r: dict[str, Any]) -> str:
+    return (f"{r['data_s']:g} s of data in {r['wall_s']:.2f} s wall = {r['speed_x']:.1f}x real "
+            f"time; CPU {r['cpu_s']:.2f} s (fits {r['fit_cpu_s']:.2f} s), {r['windows']} "
+            f"windows, {r['gfrf_analysed']} GFRF analyses; load average "
+            f"{r['load_avg_1min']:.2f} on {os.cpu_count()} cores")
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--duration", type=float, default=60.0, help="seconds of data (default 60)")
     p.add_argument("--repeat", type=int, default=3, help="runs (default 3; the best counts)")
+    p.add_argument("--baseline", type=Path,
+                   help="another checkout: alternate its runs with this one's, compare medians")
     p.add_argument("--json", help="write the results as JSON")
     args = p.parse_args()
     env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
            "ROS_LOG_DIR": tempfile.mkdtemp(prefix="sim_clock_bench_log_")}
     env.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 90))  # below the tests' range
-    runs = []
+    envs = {"this": env}
+    if args.baseline is not None:
+        if not (args.baseline / "pmsm_sysid" / "__init__.py").is_file():
+            raise SystemExit(f"--baseline {args.baseline}: no pmsm_sysid package there")
+        envs = {"baseline": {**env, "PYTHONPATH": str(args.baseline.resolve())}, "this": env}
+    runs: dict[str, list[dict[str, Any]]] = {k: [] for k in envs}
     for i in range(args.repeat):
-        r = one_run(args.duration, env)
-        runs.append(r)
-        print(f"run {i + 1}: {r['data_s']:g} s of data in {r['wall_s']:.2f} s wall = "
-              f"{r['speed_x']:.1f}x real time; CPU {r['cpu_s']:.2f} s (fits "
-              f"{r['fit_cpu_s']:.2f} s), {r['windows']} windows, {r['gfrf_analysed']} GFRF "
-              f"analyses; load average {r['load_avg_1min']:.2f} on {os.cpu_count()} cores",
-              flush=True)
-    best = max(runs, key=lambda r: r["speed_x"])
+        for name, e in envs.items():
+            r = one_run(args.duration, e)
+            runs[name].append(r)
+            print(f"run {i + 1} ({name}): {_line(r)}", flush=True)
+    best = max(runs["this"], key=lambda r: r["speed_x"])
     verdict = "meets" if best["speed_x"] >= TARGET else "is below"
     print(f"best: {best['speed_x']:.1f}x real time (real time = 1.0x: {args.duration:g} s of "
           f"data take {args.duration:g} s); {verdict} the {TARGET:g}x target "
           f"(load average {best['load_avg_1min']:.2f}: the target is for an idle machine)")
+    for name, rs in runs.items():
+        print(f"median ({name}, {len(rs)} runs): "
+              f"{statistics.median(r['speed_x'] for r in rs):.1f}x real time, CPU "
+              f"{statistics.median(r['cpu_s'] for r in rs):.2f} s")
     if args.json:
         Path(args.json).write_text(json.dumps({"runs": runs, "best": best}, indent=2) + "\n")
     return 0
