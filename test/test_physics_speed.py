@@ -55,7 +55,8 @@ def _plants() -> dict[str, Plant]:
                                                   coulomb_friction=CoulombFriction(4.0),
                                                   noise=NOISE),
            "whole-sample delay": nom.with_effects(transport_delay=TransportDelay(0.006)),
-           "stiff friction": nom.with_effects(coulomb_friction=CoulombFriction(40.0))}
+           "stiff friction": nom.with_effects(coulomb_friction=CoulombFriction(40.0)),
+           "cogging without harmonics": nom.with_effects(cogging=Cogging(0.7, 0.008, 0.3))}
     for name, block in BLOCKS.items():
         out[name] = nom.with_effects(**{name: block})
         out[f"{name} + noise"] = nom.with_effects(**{name: block, "noise": NOISE})

@@ -29,7 +29,8 @@ def effect_function(plant: Plant) -> EffectForce | None:
     """The plant's ``F_effects(x, v, F)`` for floats (None: the plant has no effect force).
 
     The same terms in the same order as ``motor._effects`` (cogging and its harmonics,
-    Coulomb, Stribeck, offset, minus ripple, spring), each with its constants read once.
+    Coulomb, Stribeck, offset, minus ripple, spring), each with its constants read once; a
+    plant with one block gets that block's term alone.
     """
     cog, cf, sf = plant.cogging, plant.coulomb_friction, plant.stribeck_friction
     off, rip, spring = plant.force_offset, plant.thrust_ripple, plant.spring
@@ -50,6 +51,18 @@ def effect_function(plant: Plant) -> EffectForce | None:
     has = (cog is not None, cf is not None, sf is not None, off is not None, rip is not None,
            spring is not None)
     has_cog, has_cf, has_sf, has_off, has_rip, has_spring = has
+    if sum(has) == 1 and not harmonics:  # one block: its term alone, no look at the others
+        if has_cog:
+            return lambda x, v, f: 0.0 + ca * sin(k * x + cp)
+        if has_cf:
+            return lambda x, v, f: 0.0 + fc * tanh(v / fs)
+        if has_sf:
+            return lambda x, v, f: 0.0 + ss * exp(-((v / sv) ** 2)) * tanh(v / sw)
+        if has_off:
+            return lambda x, v, f: 0.0 + offset
+        if has_rip:
+            return lambda x, v, f: 0.0 - rr * sin(_TWO_PI * x / rp + rph) * f
+        return lambda x, v, f: 0.0 + stiffness * x
 
     def effects(x: float, v: float, f: float) -> float:
         total = 0.0
