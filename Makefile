@@ -59,6 +59,7 @@ bags: $(STAMP)
 bench: $(STAMP)
 	$(PY) bench/ofr_bench.py
 	$(PY) bench/gfrf_bench.py
+	$(PY) bench/simulate_bench.py
 
 # colcon build of this package as ament_python in a temporary workspace (also part of `test`)
 colcon: $(STAMP)
