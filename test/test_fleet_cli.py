@@ -16,6 +16,7 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pyarrow.parquet as pq
 import pytest
@@ -39,13 +40,14 @@ def _fleet(*args: str, timeout: float = DEADLINE_S,
                           timeout=timeout, check=False, env=env)
 
 
-def _in_process(*args: str) -> subprocess.CompletedProcess[str]:
-    """``pmsm-sysid fleet ARGS`` that starts no cluster (refused before any work, or nothing
-    left to analyse), run in this process: its exit status, stdout and stderr as the console
-    script gives them, without an interpreter started for it. The executable's own exit
-    status and stderr line are checked on a scheduler that does not answer (its own
-    process), and every fleet that runs rows is a process of its own."""
-    return invoke("fleet", *args, env=dict(os.environ, PMSM_SYSID_PROGRESS="0"))
+def _in_process(*args: str, bar: bool = False) -> subprocess.CompletedProcess[str]:
+    """``pmsm-sysid fleet ARGS`` run in this process: its exit status, stdout and stderr as
+    the console script gives them, without an interpreter started for it (its local
+    cluster's workers are processes of their own all the same). The executable's own exit
+    status and stderr line are checked on a scheduler that does not answer, and a batch
+    killed half way and its resumed run are processes of their own."""
+    return invoke("fleet", *args,
+                  env=dict(os.environ, PMSM_SYSID_PROGRESS="1" if bar else "0"))
 
 
 def _one_line(proc: subprocess.CompletedProcess[str], *fragments: str) -> str:
@@ -173,9 +175,9 @@ def test_bad_recordings_are_rows_with_their_reason_and_the_batch_goes_on(
     empty = _empty_bag(tmp_path / "empty")
     broken = _unreadable_bag(tmp_path / "broken")
     out = tmp_path / "out"
-    proc = _fleet(str(good), str(short), str(empty), str(broken), "--plant", str(NOMINAL),
-                  "--out", str(out), "--workers", "2", "--json", str(tmp_path / "s.json"),
-                  bar=True)
+    proc = _in_process(str(good), str(short), str(empty), str(broken), "--plant",
+                       str(NOMINAL), "--out", str(out), "--workers", "2", "--json",
+                       str(tmp_path / "s.json"), bar=True)
     assert proc.returncode == 1, proc.stderr[-3000:]
     assert "Traceback" not in proc.stderr
     assert "4/4" in proc.stderr and "failed 3" in proc.stderr and "/min" in proc.stderr
@@ -264,7 +266,7 @@ def test_a_recording_of_the_simulator_is_the_reference_with_sim(
     sim = recording(tmp_path / "sim", drive(coulomb_friction=None), seed=99, day=0)
     out = tmp_path / "out"
     args = [*map(str, five_recordings[:2]), "--out", str(out), "--workers", "1"]
-    proc = _fleet(*args, "--sim", str(sim))
+    proc = _in_process(*args, "--sim", str(sim))
     assert proc.returncode == 0, proc.stderr[-3000:]
     rows = pq.read_table(out / "results.parquet").to_pylist()
     assert [r["status"] for r in rows] == ["ok", "ok"], [r["error"] for r in rows]
@@ -308,9 +310,25 @@ def test_a_simulation_fitted_once_gives_the_same_diagnosis() -> None:
 
 @pytest.fixture
 def dask_cluster(tmp_path: Path) -> Iterator[str]:
-    """A Dask scheduler and one worker, each its own process on this host."""
+    """A Dask scheduler and one worker, each its own process on this host, with the
+    worker settings of the fleet's local cluster (as docs/fleet.md says: a Dask
+    configuration file, in the directory DASK_CONFIG names)."""
+    import yaml
+
+    from pmsm_sysid.batch.cluster import WORKER_CONFIG
+
     info = tmp_path / "scheduler.json"
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    (tmp_path / "dask").mkdir()
+    settings: dict[str, Any] = {}
+    for key, value in WORKER_CONFIG.items():
+        *parents, name = key.split(".")
+        inner = settings
+        for p in parents:
+            inner = inner.setdefault(p, {})
+        inner[name] = value
+    (tmp_path / "dask" / "pmsm-sysid.yaml").write_text(yaml.safe_dump(settings))
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1",
+               DASK_CONFIG=str(tmp_path / "dask"))
     procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host",
                                "127.0.0.1", "--port", "0", "--no-dashboard",
                                "--scheduler-file", str(info)], env=env,
@@ -345,8 +363,8 @@ def test_the_same_command_runs_on_a_dask_cluster(tmp_path: Path, dask_cluster: s
     from dask.distributed import Client
 
     out = tmp_path / "out"
-    proc = _fleet(*map(str, five_recordings[:2]), "--plant", str(NOMINAL), "--out", str(out),
-                  "--scheduler", dask_cluster)
+    proc = _in_process(*map(str, five_recordings[:2]), "--plant", str(NOMINAL), "--out",
+                       str(out), "--scheduler", dask_cluster)
     assert proc.returncode == 0, proc.stderr[-3000:]
     table = pq.read_table(out / "results.parquet").to_pylist()
     assert [r["status"] for r in table] == ["ok", "ok"]
