@@ -2,10 +2,12 @@
 (``pmsm_sysid.cli.main``: its exit status, stdout and stderr), without starting a Python
 and importing numpy, scipy and matplotlib again for every call (about 1.2 s of CPU each).
 
-Only for the offline verbs (no ROS, no signals, no processes of their own) and for the
-fleet's bad arguments (refused before it starts a cluster); the console scripts themselves
-are run as processes in test_install.py, and the ROS verbs, a fleet that runs, and every
-signal or kill test stay separate processes.
+For the offline verbs (no ROS, no signals) and for fleets whose output is checked by its
+result (their Dask workers are processes still); the console scripts themselves are run as
+processes in test_install.py, and the ROS verbs, a fleet whose stderr must be empty (Dask's
+logs reach a process's stream, not a captured one), and every signal or kill test stay
+separate processes. The ROS verbs' refused input runs in-process through
+reliability_helpers.ros_verb.
 """
 
 from __future__ import annotations
