@@ -12,10 +12,10 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import butter, sosfiltfilt
 
 from ..recording.signals import Recording
 from ..recording.spans import Parts, as_parts
+from .zerophase import butter_sos, sosfiltfilt
 
 FloatArray = NDArray[np.float64]
 
@@ -92,7 +92,7 @@ def _corr_z(a: FloatArray, b: FloatArray, centre: bool = False) -> float:
 
 def high_band(sig: FloatArray, fs: float) -> FloatArray:
     """``sig`` above 0.3 fs (its 20 samples of filter start-up at each end left out)."""
-    hp = butter(4, 0.3 * fs, btype="highpass", fs=fs, output="sos")
+    hp = butter_sos(4, 0.3 * fs, fs, "highpass")
     out: FloatArray = sosfiltfilt(hp, sig)[20:-20]
     return out
 

@@ -33,7 +33,9 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import lfilter, sosfiltfilt
+from scipy.signal import lfilter
+
+from .zerophase import sosfiltfilt
 
 FloatArray = NDArray[np.float64]
 

@@ -35,7 +35,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import butter, sosfiltfilt
 
 from ..errors import DiagnoseError
 from ..physics.plant import SIGN_SMOOTHING_MPS, Plant
@@ -46,6 +45,7 @@ from .calibration import SpeedPrior, calibrated_friction
 from .feedback import high_band
 from .instruments import reading_instruments
 from .memo import ContentCache, content_key
+from .zerophase import butter_sos, sosfiltfilt
 
 FloatArray = NDArray[np.float64]
 
@@ -130,7 +130,7 @@ def kinematic_mode(rec: Parts, spec: FilterSpec, closed_loop: bool = True) -> st
     if not closed_loop:
         return "speed"
     fs = parts[0].sample_rate_hz
-    sos = np.asarray(butter(spec.order, spec.cutoff_hz, fs=fs, output="sos"))
+    sos = butter_sos(spec.order, spec.cutoff_hz, fs)
     imp = np.zeros(2049)
     imp[1024] = 1.0
     d1 = fs * (imp[1:] - imp[:-1])
@@ -371,7 +371,7 @@ def equation_data(plant: Plant, rec: Recording, filt: FilterSpec | None = None,
     if len(rec) < max(MIN_SAMPLES, 4 * spec.edge):
         raise DiagnoseError(f"{len(rec)} samples are too few for the equation error "
                             f"(need {max(MIN_SAMPLES, 4 * spec.edge)} at {fs:g} Hz)")
-    sos = np.asarray(butter(spec.order, spec.cutoff_hz, fs=fs, output="sos"), dtype=np.float64)
+    sos = butter_sos(spec.order, spec.cutoff_hz, fs)
     x, v, a, inertial = _nominal_dynamics(plant, rec, mode)
     tau = plant.thrust_lag.tau_s if plant.thrust_lag is not None else 0.0
     delay = plant.transport_delay.delay_s if plant.transport_delay is not None else 0.0

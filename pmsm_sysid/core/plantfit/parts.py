@@ -16,7 +16,6 @@ from dataclasses import fields, replace
 from typing import Any
 
 import numpy as np
-from scipy.signal import butter
 
 from ..errors import DiagnoseError
 from ..physics.plant import SIGN_SMOOTHING_MPS, Plant
@@ -30,6 +29,7 @@ from .kinematics import (
     equation_data,
     smoothed_speed_noise,
 )
+from .zerophase import butter_sos
 
 #: Fields that describe the filter or the whole data, the same for every part.
 SHARED = ("sos", "parts")
@@ -65,7 +65,7 @@ def equation_data_parts(plant: Plant, rec: Parts, filt: FilterSpec | None = None
     fs = parts[0].sample_rate_hz
     mode = mode or ("position" if parts[0].speed_derived else "speed")
     spec = filt or choose_filter([p.speed for p in parts], fs)
-    sos = np.asarray(butter(spec.order, spec.cutoff_hz, fs=fs, output="sos"), dtype=np.float64)
+    sos = butter_sos(spec.order, spec.cutoff_hz, fs)
     noise = smoothed_speed_noise(parts, mode, sos)
     ends = [np.concatenate(_interval_ends(p, mode, sos)) for p in parts]
     prior = SpeedPrior.from_speeds(np.concatenate(ends), noise, SIGN_SMOOTHING_MPS)

@@ -13,11 +13,12 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import sosfiltfilt, welch
+from scipy.signal import welch
 from scipy.stats import chi2
 
 from ..recording.spans import Parts, as_parts
 from .kinematics import EquationData
+from .zerophase import sosfiltfilt
 
 FloatArray = NDArray[np.float64]
 

@@ -1,0 +1,94 @@
+"""The zero-phase filter of the fit, as SciPy computes it, without its per-call overhead.
+
+:func:`sosfiltfilt` gives what :func:`scipy.signal.sosfiltfilt` (odd padding, default pad
+length) gives, bit for bit and in the same memory layout (a reversed view of the backward
+pass's buffer, so reductions downstream sum in the same order): the same odd extension,
+the same initial states (:func:`scipy.signal.sosfilt_zi`, kept per filter here instead of
+solved again on every call), and the same compiled second-order-section loop run over the
+same row-major buffers. What it leaves out is SciPy's generic handling of axes, which
+transposed a many-column array twice per pass (measured: on a 5000 x 32 block, 4.7 ms of
+which 1.9 ms were filtering; 0.25 ms for a 5000-sample signal, 0.06 ms filtering).
+Anything else (other dtypes, dimensions, a signal shorter than the padding) goes to SciPy.
+``butter_sos`` keeps Butterworth designs the same way (a design per call was a tenth of a
+fit's filtering). test_plantfit_speed checks both against SciPy.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import signal
+from scipy.signal._sosfilt import _sosfilt
+
+FloatArray = NDArray[np.float64]
+Band = Literal["lowpass", "highpass"]
+
+#: Initial states of the latest filters, by the filter's bytes (a few designs per fit).
+_KEPT_ZI = 64
+
+
+@functools.lru_cache(maxsize=_KEPT_ZI)
+def _zi(key: bytes, n_sections: int) -> FloatArray:
+    sos = np.frombuffer(key, dtype=np.float64).reshape(n_sections, 6)
+    zi = np.asarray(signal.sosfilt_zi(sos), dtype=np.float64)
+    zi.flags.writeable = False
+    return zi
+
+
+def _padlen(sos: FloatArray) -> int:
+    """SciPy's default pad length for ``sos`` (poles and zeros at the origin discounted)."""
+    ntaps = 2 * sos.shape[0] + 1
+    ntaps -= min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum()))
+    return int(3 * ntaps)
+
+
+def _fast(sos: Any, x: Any, axis: int) -> bool:
+    return (isinstance(sos, np.ndarray) and sos.dtype == np.float64 and sos.ndim == 2
+            and sos.shape[1] == 6 and sos.shape[0] > 0 and bool(np.all(sos[:, 3] == 1.0))
+            and isinstance(x, np.ndarray) and x.dtype == np.float64 and x.ndim in (1, 2)
+            and -x.ndim <= axis < x.ndim and x.shape[axis] > _padlen(sos)
+            and x.size > 0)
+
+
+def sosfiltfilt(sos: FloatArray, x: FloatArray, axis: int = -1) -> FloatArray:
+    """``scipy.signal.sosfiltfilt(sos, x, axis)`` (module doc)."""
+    if not _fast(sos, x, axis):
+        out: FloatArray = signal.sosfiltfilt(sos, x, axis=axis)
+        return out
+    axis %= x.ndim
+    n_sections, p = sos.shape[0], _padlen(sos)
+    zi = _zi(np.ascontiguousarray(sos).tobytes(), n_sections)
+    sos_c = np.ascontiguousarray(sos)
+    rows = np.moveaxis(x, axis, -1).reshape(-1, x.shape[axis])  # (signals, samples)
+    n = rows.shape[1]
+    ext = np.empty((rows.shape[0], n + 2 * p))  # row-major, as SciPy's copy is
+    ext[:, :p] = 2 * rows[:, :1] - rows[:, p:0:-1]
+    ext[:, p:p + n] = rows
+    ext[:, p + n:] = 2 * rows[:, -1:] - rows[:, -2:-(p + 2):-1]
+    _sosfilt(sos_c, ext, np.ascontiguousarray(zi[None] * ext[:, 0, None, None]))
+    back = np.ascontiguousarray(ext[:, ::-1])
+    _sosfilt(sos_c, back, np.ascontiguousarray(zi[None] * ext[:, -1, None, None]))
+    y = back[:, ::-1][:, p:p + n]
+    if x.ndim == 1:
+        return y.reshape(-1)
+    return np.moveaxis(y, -1, axis)
+
+
+@functools.lru_cache(maxsize=64)
+def _butter(order: int, cutoff_hz: float, fs: float, btype: Band) -> FloatArray:
+    sos = np.asarray(signal.butter(order, cutoff_hz, btype=btype, fs=fs, output="sos"),
+                     dtype=np.float64)
+    sos.flags.writeable = False
+    return sos
+
+
+def butter_sos(order: int, cutoff_hz: float, fs: float, btype: Band = "lowpass") -> FloatArray:
+    """``scipy.signal.butter(order, cutoff_hz, btype, fs=fs, output="sos")`` as float64,
+    designed once per set of arguments (a copy of its own for each caller)."""
+    return _butter(int(order), float(cutoff_hz), float(fs), btype).copy()
+
+
+__all__ = ["butter_sos", "sosfiltfilt"]
