@@ -4,6 +4,7 @@ bit: the AR whitener's Yule-Walker solve and root test, and the speed prior's di
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -76,13 +77,15 @@ def test_max_root_is_that_of_np_roots() -> None:
 
 
 def _ar_whitener_by_library(e: np.ndarray, max_order: int) -> np.ndarray:
-    """The whitener with its two fast paths replaced by the library calls they stand for
-    (solve_toeplitz for the Yule-Walker solve, np.roots for the root test)."""
+    """The whitener with its three fast paths replaced by the library calls they stand for
+    (solve_toeplitz for the Yule-Walker solve, np.roots for the root test) and by the root
+    test of every order up to the first unstable one (none settled early)."""
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(stats, "_yule_walker",
                       lambda r, p: solve_toeplitz(r[:p], r[1:p + 1]))
         patch.setattr(stats, "_max_root",
                       lambda poly: float(np.max(np.abs(np.roots(poly)))))
+        patch.setattr(stats, "_settled", lambda lowest, best: False)
         return stats._ar_whitener(e, max_order)
 
 
@@ -94,6 +97,34 @@ def test_the_whitener_is_the_library_one() -> None:
             assert np.array_equal(got, _ar_whitener_by_library(e, m))
             orders.add(len(got) - 1)
     assert len(orders) > 3  # the cases reach several orders (and the unit-circle stop)
+
+
+def test_the_root_test_stops_once_no_higher_order_can_win() -> None:
+    """The orders above the last that could still lower the BIC are not root-tested, and
+    the choice is that of testing every order (unstable orders met included)."""
+    roots: dict[str, list[float]] = {"fast": [], "every": []}
+    max_root = stats._max_root
+
+    def counted(kind: str) -> Callable[[np.ndarray], float]:
+        def run(poly: np.ndarray) -> float:
+            roots[kind].append(max_root(poly))
+            return roots[kind][-1]
+        return run
+
+    rng = np.random.default_rng(5)
+    cases = _residuals() + [lfilter([1.0], [1.0, -1.999, 0.9991], rng.standard_normal(3000))
+                            for _ in range(5)]  # a pole pair at 0.99955
+    for e in cases:
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(stats, "_max_root", counted("fast"))
+            got = stats._ar_whitener(e, 20)
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(stats, "_max_root", counted("every"))
+            patch.setattr(stats, "_settled", lambda lowest, best: False)
+            want = stats._ar_whitener(e, 20)
+        assert np.array_equal(got, want)
+    assert len(roots["fast"]) < 0.7 * len(roots["every"])
+    assert sum(r >= 0.999 for r in roots["every"]) >= 5  # the unit-circle stop is met
 
 
 def test_a_non_finite_residual_is_refused_as_before() -> None:

@@ -9,6 +9,7 @@ residual is close to white and the classical F distribution applies.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -40,6 +41,13 @@ def ar_whitener(e: FloatArray, max_order: int = MAX_AR_ORDER) -> FloatArray:
 
 
 def _ar_whitener(e: FloatArray, max_order: int) -> FloatArray:
+    """The order with the lowest BIC among those before the first unstable one (a root at
+    0.999 or more, or a Yule-Walker system that cannot be solved).
+
+    The root test (an eigenvalue problem per order) is the costly part; it is run in order,
+    and only while some higher order could still lower the BIC: once none can
+    (:func:`_settled`), the stability of the orders above cannot change the choice. The
+    result is that of testing every order (test_plantfit_speed checks it)."""
     x = e - float(np.mean(e))
     n = len(x)
     max_order = max(0, min(max_order, n // 10))
@@ -47,6 +55,20 @@ def _ar_whitener(e: FloatArray, max_order: int) -> FloatArray:
     if r[0] <= 0:
         return np.ones(1)
     best = (math.log(r[0]), np.ones(1))
+    fits = _fits(r, n, max_order)
+    lowest = list(itertools.accumulate((bic for bic, _ in reversed(fits)), min))[::-1]
+    for (bic, poly), below in zip(fits, lowest, strict=True):
+        if _settled(below, best[0]) or _max_root(poly) >= 0.999:
+            break
+        if bic < best[0]:
+            best = (bic, poly)
+    return best[1]
+
+
+def _fits(r: FloatArray, n: int, max_order: int) -> list[tuple[float, FloatArray]]:
+    """(BIC, polynomial) of the Yule-Walker fits of orders 1, 2, ... up to the first that
+    cannot be solved or leaves no error variance."""
+    out: list[tuple[float, FloatArray]] = []
     direct = bool(np.all(np.isfinite(r)))  # else solve_toeplitz says what is wrong
     for p in range(1, max_order + 1):
         try:
@@ -57,12 +79,15 @@ def _ar_whitener(e: FloatArray, max_order: int) -> FloatArray:
         if sigma2 <= 0:
             break
         poly = np.concatenate([[1.0], -a])
-        if _max_root(poly) >= 0.999:
-            break
         bic = math.log(sigma2) + p * math.log(n) / n
-        if bic < best[0]:
-            best = (bic, poly)
-    return best[1]
+        # a non-finite fit is root-tested when reached (the test refuses it, as it did)
+        out.append((bic if np.all(np.isfinite(poly)) else -math.inf, poly))
+    return out
+
+
+def _settled(lowest_ahead: float, best: float) -> bool:
+    """No order from here on has a BIC below the best so far (ties keep the lower order)."""
+    return not lowest_ahead < best
 
 
 def _yule_walker(r: FloatArray, p: int) -> FloatArray:
