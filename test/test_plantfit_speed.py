@@ -11,16 +11,20 @@ import pytest
 from scipy.linalg import solve_toeplitz
 from scipy.signal import lfilter
 
+from pmsm_sysid.core.discrepancy import local
+from pmsm_sysid.core.discrepancy.local import best_bump
 from pmsm_sysid.core.physics.excitation import make_excitation
 from pmsm_sysid.core.physics.motor import simulate
 from pmsm_sysid.core.physics.plant import SIGN_SMOOTHING_MPS, nominal_plant
-from pmsm_sysid.core.plantfit import stats
+from pmsm_sysid.core.plantfit import library, stats
 from pmsm_sysid.core.plantfit.calibration import SpeedPrior, calibrated_friction
-from pmsm_sysid.core.plantfit.kinematics import EquationData, equation_data, projected
+from pmsm_sysid.core.plantfit.kinematics import EquationData, equation_data, projected, thinned
 from pmsm_sysid.core.plantfit.library import (
     FIRST_STAGE,
     FIXED,
+    Effect,
     Family,
+    columns,
     families,
     family_chunks,
     inputs_key,
@@ -243,3 +247,55 @@ def test_a_family_chunk_key_follows_every_field_its_columns_read(noisy_reading: 
             if fam.name in FIRST_STAGE:
                 want = d.instrument(want)
             assert np.array_equal(got, want)
+
+
+# --------------------------------------------------------------------------- columns kept by inputs
+
+
+@pytest.mark.parametrize("noisy_reading", [False, True])
+def test_an_effects_columns_kept_by_inputs_are_those_projected(noisy_reading: bool) -> None:
+    """``columns`` (kept by the effect's inputs) gives what projecting its raw columns
+    gives, before and after the data change (no stale hit)."""
+    plant = nominal_plant()
+    rec = simulate(plant, make_excitation("paper-position", 3000, 500.0, seed=6), seed=4)
+    d = equation_data(plant, rec, thrust_gap=3 if noisy_reading else 0)
+    d2 = dataclasses.replace(d, x=d.x + 1e-3, v=d.v * 1.01, v_iv=d.v_iv * 0.99,
+                             a_iv=d.a_iv * 1.02, cmd=d.cmd + 0.5)
+    effects = [Effect(n) for n in FIXED] + [
+        Effect("cogging", pitch_m=0.0307, orders=(1, 2)), Effect("thrust_ripple", pitch_m=0.05),
+        Effect("stribeck_friction", velocity_mps=0.01)]
+    for data in (d, d2, d):
+        for e in effects:
+            got = columns(e, data)
+            with pytest.MonkeyPatch.context() as patch:
+                patch.setattr(library, "inputs_key", lambda name, data: None)
+                want = columns(e, data)
+            assert _same(got, want), e.name
+
+
+def test_the_bumps_kept_by_position_are_those_projected() -> None:
+    """The bump columns (kept by the position and the members) are those projected, when
+    the position changes with the members the same (no stale hit)."""
+    plant = nominal_plant()
+    rec = simulate(plant, make_excitation("paper-position", 3000, 500.0, seed=7), seed=5)
+    d = equation_data(plant, rec)
+    lo, hi = np.quantile(d.x, [0.2, 0.8])
+    inner = (d.x > lo) & (d.x < hi)
+    moved = dataclasses.replace(d, x=np.where(inner, d.x + 1e-6, d.x))
+    members = local.local_grid(d)[0]
+    assert members == local.local_grid(moved)[0]
+    y = d.y + 0.3 * np.exp(-0.5 * ((thinned(d, d.x) - float(np.median(d.x))) / 2e-3) ** 2)
+    for data in (d, moved, d):
+        for start in (0, 16, len(members) - 5):
+            chunk = members[start:start + 16]
+            want = data.project(local._bumps(data.x, chunk))
+            assert _same(local.bump_columns(data, chunk), want)
+        got = best_bump(data, y, np.ones((d.n, 1)))
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(local, "bump_columns",
+                          lambda data, chunk: data.project(local._bumps(data.x, chunk)))
+            assert got == best_bump(data, y, np.ones((d.n, 1)))
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and a.strides == b.strides and np.array_equal(a, b)

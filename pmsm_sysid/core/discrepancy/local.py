@@ -15,12 +15,15 @@ acts: the share of the mismatch it explains over the samples within its half-max
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..plantfit.kinematics import EquationData, thinned
+from ..plantfit.library import project_made
+from ..plantfit.memo import content_key
 
 FloatArray = NDArray[np.float64]
 
@@ -37,6 +40,18 @@ def bump_column(x: FloatArray, centre: float, sigma: float) -> FloatArray:
     """exp(-(x - centre)² / 2σ²): a force at one place of the stroke."""
     out: FloatArray = np.exp(-0.5 * ((np.asarray(x) - centre) / sigma) ** 2)
     return out
+
+
+def _bumps(x: FloatArray, members: list[tuple[float, float]]) -> FloatArray:
+    out: FloatArray = np.column_stack([bump_column(x, c, s) for c, s in members])
+    return out
+
+
+def bump_columns(data: EquationData, members: list[tuple[float, float]]) -> FloatArray:
+    """The members' columns, filtered (:meth:`.EquationData.project`), kept by the position
+    and the members (:func:`.library.project_made`)."""
+    what = content_key("bumps", data.x, tuple(members))
+    return project_made(data, what, functools.partial(_bumps, data.x, members))
 
 
 def local_grid(data: EquationData) -> tuple[list[tuple[float, float]], float]:
@@ -67,7 +82,7 @@ def best_bump(data: EquationData, y: FloatArray,
     gain = np.empty(len(members))
     for start in range(0, len(members), CHUNK):
         chunk = members[start:start + CHUNK]
-        cols = data.project(np.column_stack([bump_column(data.x, c, s) for c, s in chunk]))
+        cols = bump_columns(data, chunk)
         cols -= q @ (q.T @ cols)
         norm = np.einsum("nk,nk->k", cols, cols)
         gain[start:start + len(chunk)] = (cols.T @ y) ** 2 / np.maximum(norm, 1e-300)

@@ -26,7 +26,7 @@ A thrust lag and a transport delay shorter than a sample both act, to first orde
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -134,8 +134,13 @@ def dynamic_part(e: Effect, data: EquationData) -> FloatArray:
 
 
 def columns(e: Effect, data: EquationData) -> FloatArray:
-    """Parallel-filtered regressor columns of ``e`` (n × width)."""
-    out = data.project(raw_columns(e, data))
+    """Parallel-filtered regressor columns of ``e`` (n × width): a family chunk of one
+    (kept by its inputs, :func:`_projected_chunk`) where its inputs are listed."""
+    inputs = inputs_key(e.name, data) if not e.dynamic else None
+    if inputs is None:
+        out = data.project(raw_columns(e, data))
+    else:
+        out = _projected_chunk((e,), data, inputs)
     return data.instrument(out) if e.name in FIRST_STAGE else out
 
 
@@ -295,6 +300,19 @@ def _projected_chunk(chunk: tuple[Effect, ...], data: EquationData,
     if inputs is None:
         return compute()
     return PROJECTED.array(content_key("family chunk", inputs, chunk), compute)
+
+
+def project_made(data: EquationData, what: bytes, make: Callable[[], FloatArray],
+                 ) -> FloatArray:
+    """:meth:`.kinematics.EquationData.project` of the columns ``make()`` builds, kept by
+    ``what`` (a content key of everything ``make`` reads of ``data``) instead of by their
+    own bytes: when kept, they are neither built nor hashed again (measured: hashing the
+    columns built only to look them up was a tenth of a diagnosis)."""
+    e, d = data.filt.edge, data.filt.decimation
+    bounds = tuple(data.instants()) if data.parts else ()
+    key = content_key("project made", what, data.sos, e, d, bounds)
+    return PROJECTED.array(key, lambda: projected(
+        data.sos, np.asarray(make(), dtype=np.float64), e, d, bounds))
 
 
 def family_chunks(fam: Family, data: EquationData) -> Iterator[tuple[int, FloatArray]]:
