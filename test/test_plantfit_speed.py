@@ -13,6 +13,7 @@ from scipy.signal import lfilter
 
 from pmsm_sysid.core.discrepancy import local
 from pmsm_sysid.core.discrepancy.local import best_bump
+from pmsm_sysid.core.discrepancy.nonparam import fit_axis_with
 from pmsm_sysid.core.physics.excitation import make_excitation
 from pmsm_sysid.core.physics.motor import simulate
 from pmsm_sysid.core.physics.plant import SIGN_SMOOTHING_MPS, nominal_plant
@@ -299,3 +300,21 @@ def test_the_bumps_kept_by_position_are_those_projected() -> None:
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
     return a.shape == b.shape and a.strides == b.strides and np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("axis", ["time", "position", "position_friction", "position_local",
+                                  "velocity", "thrust"])
+def test_a_curves_columns_kept_by_its_axis_are_those_projected(axis: str) -> None:
+    """A curve's filtered columns (kept by its axis values and range) are those projected,
+    when the axis changes under the same curve too (no stale hit)."""
+    plant = nominal_plant()
+    rec = simulate(plant, make_excitation("paper-position", 3000, 500.0, seed=8), seed=6)
+    d = equation_data(plant, rec, thrust_gap=3)
+    model = fit_axis_with(d, d.y, np.ones((d.n, 1)), axis,
+                          freq_hz=3.0 if axis == "time" else 0.0)[0]
+    changed = dataclasses.replace(d, x=d.x * 1.001, v=d.v * 0.999, v_iv=d.v_iv * 1.002,
+                                  force=d.force + 0.1, force_iv=None, t=d.t + 1e-3,
+                                  v_lo=d.v_lo * 1.01)
+    slower = dataclasses.replace(d, v_lo=d.v_lo * 0.5, v_hi=d.v_hi * 0.5)  # friction only
+    for data in (d, changed, d, slower):
+        assert _same(model.projected(data), data.project(model.raw(data)))

@@ -42,6 +42,8 @@ from numpy.typing import NDArray
 from scipy.interpolate import BSpline
 
 from ..plantfit.kinematics import EquationData, thinned, thinned_times
+from ..plantfit.library import project_made
+from ..plantfit.memo import content_key
 from ..plantfit.stats import ar_whitener, lstsq, whiten
 from .local import FWHM, N_INTERVALS, best_bump, bump_column
 
@@ -97,9 +99,26 @@ class AxisModel:
             basis = basis * s[:, None]
         return basis
 
+    def projected(self, data: EquationData) -> FloatArray:
+        """``data.project(self.raw(data))``, kept by what the columns are made of (the
+        axis's values, the curve's range; :func:`.library.project_made`): a diagnosis
+        projects the same curve's columns many times, and building them and hashing 17
+        full-rate columns for each lookup cost more than hashing the axis."""
+        if self.axis == "time":
+            inputs: tuple[object, ...] = (data.t,)
+        elif self.axis == "position_friction":
+            inputs = (data.x, data.friction())
+        elif self.axis == "position_local":
+            inputs = (data.x,)
+        else:
+            inputs = (axis_values(data, self.axis),)
+        what = content_key("axis model", self.axis, self.lo, self.hi, self.freq_hz,
+                           self.bump, *inputs)
+        return project_made(data, what, lambda: self.raw(data))
+
     def force(self, data: EquationData) -> FloatArray:
         """The modelled force at the regression samples of ``data`` (with the line)."""
-        out: FloatArray = data.project(self.raw(data)) @ self.coef
+        out: FloatArray = self.projected(data) @ self.coef
         return out + self._beside(data, self.line, self.lean or 0.0)
 
     def baseline(self, data: EquationData) -> FloatArray:
@@ -261,7 +280,7 @@ def fit_axis_with(data: EquationData, y: FloatArray, base: FloatArray, axis: str
         q5, q95 = (float(q) for q in np.quantile(vals, [0.05, 0.95]))
         model = AxisModel(axis, lo, hi, np.zeros(N_INTERVALS + DEGREE),
                           np.eye(N_INTERVALS + DEGREE), inner=(q5, q95))
-    cols = data.project(model.raw(data))
+    cols = model.projected(data)
     X = np.hstack([base, cols])
     beta, r = lstsq(X, y)
     poly = ar_whitener(r)

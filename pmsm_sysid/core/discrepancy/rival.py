@@ -64,7 +64,7 @@ def _fit(fit: Fit, keep: tuple[int, ...], est: EquationData, val: EquationData,
     Xv, fv = design(rest, val)
     err = val.y - fv - remainder_of(fit, val, keep) - (Xv @ beta if Xv.shape[1] else 0.0) \
         - model.force(val)
-    cols = est.project(model.raw(est))
+    cols = model.projected(est)
     test = nested_f_test(y, X, cols, null_whitening=True)
     return model, sse, err, -test.corrected_log10_p(4.0)
 
@@ -94,7 +94,7 @@ def rivals(fit: Fit, est: EquationData, val: EquationData, thrust: bool,
             rest = tuple(fit.effects[k] for k in keep)
             X, fixed = design(rest, est)
             share = share_of(est.y - fixed - remainder_of(fit, est, keep), X,
-                             est.project(best[0].raw(est)))
+                             best[0].projected(est))
             out.append(Rival(axis, best[0], held,
                              tuple(fit.effects[k].name for k in group), best[3], share))
     best_of: dict[str, Rival] = {}

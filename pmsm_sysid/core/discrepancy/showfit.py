@@ -139,14 +139,14 @@ def beside_curves(out: list[tuple[FoundEffect, AxisModel]], more: list[AxisModel
     fit, d = est
     X, fixed = design(fit.effects, d)
     y = d.y - fixed - remainder_of(fit, d)
-    base = np.hstack([X, *(d.project(m.raw(d)) for m in others)])
+    base = np.hstack([X, *(m.projected(d) for m in others)])
     parts = contributions(fit, val)
     e_lib = val.y - (np.sum(parts, axis=0) if parts else 0.0)
     result = []
     for e, m in out:
         if m.axis == "time":
             sine, beta, _ = fit_axis_with(d, y, base, "time", freq_hz=m.freq_hz)
-            curves = np.hstack([val.project(c.raw(val)) for c in others])
+            curves = np.hstack([c.projected(val) for c in others])
             e0 = e_lib - curves @ beta[X.shape[1]:]
             held = held_out_test(e0, e0 - sine.force(val))
             e = replace(e, held_out=held, confidence="moderate" if held.significant
@@ -182,7 +182,7 @@ def _curve_evidence(axis: str, data: EquationData, y: FloatArray, X: FloatArray,
     total = float(data.y @ data.y)
     for kind in CURVE_KINDS[axis]:
         m = fit_axis(data, y, X, kind, line, lean)
-        cols = data.project(m.raw(data))
+        cols = m.projected(data)
         searched = local_grid(data)[1] if kind == "position_local" else 1.0
         test = nested_f_test(y, base, cols, null_whitening=True)
         sig = -test.corrected_log10_p(n_tests * searched)
