@@ -12,7 +12,10 @@ of up to ``hop`` samples, whenever the identifier has taken what was published a
 waits for a fit (back-pressure), so the run is as fast as identification allows, loses nothing and
 skips no window (deterministic: same plant and seed, same models); while a window waits, the
 executor sleeps until the fitting thread takes it (it triggers a guard condition of the
-identifier's, :meth:`.IdentifierNode.wake_on_window`), not polling; without an identifier
+identifier's, :meth:`.IdentifierNode.wake_on_window`), not polling. The fitting thread takes
+the next window while the previous one is still being fitted (it hands two at most to the
+worker process), so the worker goes from one fit to the next without waiting for the
+hand-over between them; without an identifier
 here, the sim node runs at ``rate`` x real time on its own timer. With ``record``, the
 recorder runs in a process of its own (:mod:`.nodes.recorder_process`), started after the
 nodes (a sim elsewhere that waits for a subscriber finds the identifier first); the sim here
@@ -356,6 +359,8 @@ def build_pipeline(
                 for node in (pipe.identifier, pipe.diagnose):
                     if node is not None:
                         node.wake_on_window()
+                if pipe.identifier is not None:  # the worker never waits for a hand-over
+                    pipe.identifier.engine.hand_over_ahead(2)
             elif pipe.sim is not None and wait_s > 0 and "identifier" not in names:
                 _wait_until_matched(pipe.sim, executor, wait_s, subscribers)
             pipe.started = time.monotonic()

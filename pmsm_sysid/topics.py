@@ -35,6 +35,10 @@ VALIDATION = "validation"                # diagnostic_msgs/msg/DiagnosticArray
 CHANGE = "change"                        # diagnostic_msgs/msg/DiagnosticArray
 DIAGNOSIS = "diagnosis"                  # std_msgs/msg/String, diagnose JSON of each span
 
+#: history depth of the model topic, publisher and subscribers (models may come in bursts:
+#: each publish of the identifier sends every model fitted since the last one)
+MODEL_DEPTH = 50
+
 STRING_TYPE = "std_msgs/msg/String"
 DIAGNOSTIC_ARRAY_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
 OUTPUT_TYPES = {

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pmsm_sysid.core.errors import DataError
-from pmsm_sysid.core.online.fitqueue import FitWorker, LatestQueue
+from pmsm_sysid.core.online.fitqueue import FitWorker, LatestQueue, Ticket
 from pmsm_sysid.core.online.streaming import (
     SIGNALS,
     Sample,
@@ -316,3 +316,70 @@ def test_worker_runs_off_the_calling_thread() -> None:
         time.sleep(0.01)
     worker.stop()
     assert seen == ["fit-worker"]
+
+
+class _Elsewhere:
+    """A processor that computes in a thread of its own, one item after the other (as a
+    worker process does); each item adds 1.0 to ``cpu`` (the CPU clock the worker reads).
+    Item 1 is only computed once item 2 was handed over (a 60 s wait otherwise)."""
+
+    def __init__(self) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.pool = ThreadPoolExecutor(1)
+        self.events: list[str] = []
+        self.cpu = 0.0
+        self.second = threading.Event()
+
+    def __call__(self, item: int) -> int:
+        self.events.append(f"call {item}")
+        return self._work(item)
+
+    def submit(self, item: int) -> Ticket:
+        self.events.append(f"submit {item}")
+        if item == 2:
+            self.second.set()
+        fut = self.pool.submit(self._work, item)
+        return Ticket(fut, lambda: self._collect(item, fut))
+
+    def _collect(self, item: int, fut: object) -> int:
+        self.events.append(f"collect {item}")
+        return fut.result()  # type: ignore[attr-defined,no-any-return]
+
+    def _work(self, item: int) -> int:
+        if item == 1:
+            self.events.append("overlapped" if self.second.wait(60) else "not overlapped")
+        self.cpu += 1.0
+        if item == 3:
+            raise DataError("bad item")
+        return 10 * item
+
+
+@pytest.mark.parametrize("ahead", [1, 2])
+def test_items_handed_over_ahead_overlap_and_come_back_in_order(ahead: int) -> None:
+    proc = _Elsewhere()
+    q: LatestQueue[int] = LatestQueue(maxsize=8)
+    got: list[int] = []
+    errors: list[Exception] = []
+    worker: FitWorker[int, int] = FitWorker(
+        q, proc, lambda i, r: got.append(r), lambda i, e: errors.append(e),
+        cpu_clock=lambda: proc.cpu, ahead=ahead)
+    if ahead == 1:
+        proc.second.set()  # one at a time: item 1 does not wait for item 2
+    for item in range(1, 7):
+        q.put(item)
+    worker.start()
+    worker.stop(timeout=120)  # the queue is closed: what was taken and queued is finished
+    stats = worker.stats
+    assert not worker.alive
+    assert got == [10, 20, 40, 50, 60] and [str(e) for e in errors] == ["bad item"]
+    assert stats.processed == 6 and stats.failed == 1 and q.skipped == 0
+    assert stats.cpu_s == 6.0  # each item's CPU counted once, however they overlapped
+    if ahead == 1:
+        assert [e for e in proc.events if e.startswith("submit")] == []
+    else:
+        assert proc.events.index("submit 2") < proc.events.index("collect 1")
+        assert "overlapped" in proc.events
+        assert max(int(e.split()[1]) for e in proc.events[:proc.events.index("collect 1")]
+                   if e.startswith("submit")) == 2  # never more than two handed over
+    proc.pool.shutdown()

@@ -22,18 +22,24 @@ CONFIG = TrackerConfig(outputs=(OutputConfig("speed", FitConfig(
     structure=Structure(ny=2, nu=2, degree=2), n_terms=5)),), window=400, hop=200)
 
 
-def _results(process: object, n: int = 1600) -> list[WindowResult | WindowError]:
-    """Feed the engine one hop at a time (the latest-wins queue then skips nothing)."""
+def _results(process: object, n: int = 1600,
+             ahead: int = 1) -> list[WindowResult | WindowError]:
+    """Feed the engine one hop at a time (the latest-wins queue then skips nothing); with
+    ``ahead`` > 1, all at once into a queue that holds every window, handed over ``ahead``
+    at a time."""
     engine: OnlineEngine[WindowResult] = OnlineEngine(
-        EngineConfig(window=400, hop=200, history=CONFIG.history), process)  # type: ignore[arg-type]
+        EngineConfig(window=400, hop=200, history=CONFIG.history, queue_size=n // 200),
+        process)  # type: ignore[arg-type]
+    engine.hand_over_ahead(ahead)
     engine.start()
     u = white_input(n, seed=7)
     y = simulate(QUADRATIC, u, noise_std=1e-3, seed=7)
     try:
         for k in range(n):
             engine.push_sample(NS_PER_S + k * 2_000_000, (u[k], y[k], 0.0))
-            if (k + 1) % 200 == 0:
+            if (k + 1) % 200 == 0 and ahead == 1:
                 assert engine.wait_idle(60)
+        assert engine.wait_idle(60)
         stats = engine.stats
     finally:
         engine.stop()
@@ -58,6 +64,30 @@ def test_the_tracker_in_a_worker_process_gives_the_in_process_results() -> None:
     assert len(here) == len(there) == 6
     assert [_timeless(r) for r in here] == [_timeless(r) for r in there]
     assert any(r.validations for r in there if isinstance(r, WindowResult))  # state carried
+
+
+def test_windows_handed_over_ahead_give_the_in_process_results_in_order() -> None:
+    """Two windows at the worker at once (the next sent while one is fitted): the same
+    results, in the same order, each window fitted once."""
+    here = _results(WindowTracker(CONFIG).process)
+    worker = ProcessWorker[object, WindowResult](WindowTracker, (CONFIG,), method="process")
+    there = _results(worker, ahead=2)
+    assert [_timeless(r) for r in here] == [_timeless(r) for r in there]
+
+
+def test_items_submitted_together_come_back_in_order_and_a_death_is_reported() -> None:
+    with ProcessWorker[object, WindowResult](WindowTracker, (CONFIG,),
+                                             method="process") as worker:
+        first, second = worker.submit(None), worker.submit(None)
+        for ticket in (first, second):  # not windows: the worker's errors, raised here
+            with pytest.raises(AttributeError):
+                ticket.collect()
+        pid = worker.pid
+        assert pid is not None
+        os.kill(pid, signal.SIGKILL)
+        with pytest.raises(WorkerDied):
+            worker.submit(None).collect()
+        assert worker.restarts == 1
 
 
 def test_worker_runs_elsewhere_reraises_and_replaces_a_dead_process() -> None:

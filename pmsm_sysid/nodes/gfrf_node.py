@@ -37,7 +37,7 @@ from ..core.errors import DataError, GfrfError
 from ..core.frequency.message import MessageAnalyser, analyse_message
 from ..core.online.fitqueue import FitWorker, LatestQueue
 from ..core.online.workerproc import ProcessWorker
-from ..topics import DEFAULT_NAMESPACE, MODEL, RIDGE_FREQUENCIES, RIDGES, VALIDATION
+from ..topics import DEFAULT_NAMESPACE, MODEL, MODEL_DEPTH, RIDGE_FREQUENCIES, RIDGES, VALIDATION
 from .gfrf_msgs import ridges_message, validation_message
 from .health import HealthPublisher, gfrf_health
 from .numbers import NumberPublisher
@@ -88,7 +88,9 @@ class GfrfNode(Node):
         self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION, 10)
         self.numbers = NumberPublisher(self)
         self.health = HealthPublisher(self, "gfrf", gfrf_health(self))
-        self.create_subscription(String, MODEL, self._on_model, 10)
+        # as deep as the identifier's publisher: a burst of models it publishes at once is
+        # received whole, and what is not analysed is skipped in the queue (counted)
+        self.create_subscription(String, MODEL, self._on_model, MODEL_DEPTH)
         self._timer = self.create_timer(float(p["publish_period_s"]), self.publish_results)
         self.worker.start()
 

@@ -49,7 +49,15 @@ from ..core.online.streaming import Window
 from ..core.online.tracker import TrackerConfig, WindowResult, WindowTracker, tracker_config
 from ..core.online.workerproc import ProcessWorker
 from ..rosutil import SLACK_DEPTH, data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
-from ..topics import CHANGE, DEFAULT_NAMESPACE, INPUT_TYPES, JOINT_STATE_TYPE, MODEL, VALIDATION
+from ..topics import (
+    CHANGE,
+    DEFAULT_NAMESPACE,
+    INPUT_TYPES,
+    JOINT_STATE_TYPE,
+    MODEL,
+    MODEL_DEPTH,
+    VALIDATION,
+)
 from .defaults import IDENTIFIER_DEFAULTS
 from .health import HealthPublisher, IdentifierHealth
 from .numbers import NumberPublisher
@@ -126,7 +134,7 @@ class IdentifierNode(Node):
         self._input_ended = False  # this pipeline's sim has published its last sample
         self.input_held = False  # this pipeline holds its sim on purpose (a worker is busy)
         self.stale_events = 0
-        self._model_pub = self.create_publisher(String, MODEL, 50)
+        self._model_pub = self.create_publisher(String, MODEL, MODEL_DEPTH)
         self._val_pub = self.create_publisher(DiagnosticArray, VALIDATION, 50)
         self._change_pub = self.create_publisher(DiagnosticArray, CHANGE, 50)
         self.numbers = NumberPublisher(self)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Future, wait
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
@@ -28,6 +29,7 @@ from rcl_interfaces.msg import (
 from rclpy.node import Node
 
 from ..core.errors import DataError, PmsmSysidError
+from ..core.online.fitqueue import Ticket
 
 W = TypeVar("W")
 R = TypeVar("R")
@@ -176,6 +178,8 @@ class SwitchableProcessor(Generic[W, R]):
     from then on (the old processor is closed, if it has ``close``); windows cut before the
     change still go to the old one. ``on_take`` (if set) is called as each window is taken,
     in the fitting thread (e.g. to wake an executor waiting for the queue to empty).
+    :meth:`submit` hands a window over without waiting (see :class:`.fitqueue.FitWorker`'s
+    ``ahead``); a processor switched out first finishes the windows it was given.
     """
 
     def __init__(self, process: Callable[[W], R], shape_of: Callable[[W], Any]) -> None:
@@ -183,14 +187,15 @@ class SwitchableProcessor(Generic[W, R]):
         self._pending: tuple[Callable[[W], R], Any] | None = None
         self._shape_of = shape_of
         self._lock = threading.Lock()
-        self._cpu_done = 0.0  # CPU seconds of closed worker processes
+        self._retired: list[Callable[[W], R]] = []  # closed processors (their CPU counts)
         self.switches = 0
         self.on_take: Callable[[], None] | None = None
+        self._handed_over: Future[Any] | None = None  # the newest item submitted
 
     @property
     def cpu_s(self) -> float:
         """CPU seconds spent in worker processes (0 for in-thread processing)."""
-        return self._cpu_done + float(getattr(self._current, "cpu_s", 0.0))
+        return sum(float(getattr(p, "cpu_s", 0.0)) for p in (*self._retired, self._current))
 
     def switch(self, process: Callable[[W], R], shape: Any) -> None:
         with self._lock:
@@ -199,17 +204,38 @@ class SwitchableProcessor(Generic[W, R]):
             _close(old[0])
 
     def __call__(self, window: W) -> R:
+        return self._take(window)(window)
+
+    def submit(self, window: W) -> Ticket:
+        """Hand ``window`` over without waiting for its result when the processor that
+        takes it computes elsewhere (``submit``); else process it now."""
+        process = self._take(window)
+        submit = getattr(process, "submit", None)
+        if submit is not None:
+            ticket: Ticket = submit(window)
+            self._handed_over = ticket.future
+            return ticket
+        done: Future[R] = Future()
+        try:
+            done.set_result(process(window))
+        except Exception as exc:  # delivered by collect(), as a worker's error would be
+            done.set_exception(exc)
+        return Ticket(done, done.result)
+
+    def _take(self, window: W) -> Callable[[W], R]:
+        """The processor for ``window`` (switching over here when it is due)."""
         if self.on_take is not None:
             self.on_take()
         with self._lock:
             if self._pending is not None and self._shape_of(window) == self._pending[1]:
+                if self._handed_over is not None:  # the old one finishes what it was given
+                    wait([self._handed_over])
                 old, self._current = self._current, self._pending[0]
                 self._pending = None
                 self.switches += 1
-                self._cpu_done += float(getattr(old, "cpu_s", 0.0))
+                self._retired.append(old)
                 _close(old)
-            process = self._current
-        return process(window)
+            return self._current
 
     def close(self) -> None:
         with self._lock:

@@ -153,6 +153,16 @@ class OnlineEngine(Generic[R]):
         if callable(close):
             close()
 
+    def hand_over_ahead(self, windows: int) -> None:
+        """Let the fitting thread hand up to ``windows`` windows at once to a ``process``
+        that computes elsewhere (a worker process), so it never waits for the hand-over
+        between two fits (1, the default: one at a time). A window handed over is fitted,
+        never skipped: more than 1 suits a caller that publishes nothing while a window
+        waits (the stepped sim clock), not a live input that may outrun the fits."""
+        if windows < 1:
+            raise DataError(f"windows handed over at once must be >= 1, got {windows}")
+        self._worker.ahead = windows
+
     # -- subscription path ------------------------------------------------------------
     def push(self, signal: str, stamp_ns: int, value: float) -> None:
         """One message of one signal."""

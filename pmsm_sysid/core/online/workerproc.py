@@ -30,6 +30,7 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Generic, TypeVar
 
 from ..errors import PmsmSysidError
+from .fitqueue import Ticket
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -115,7 +116,8 @@ class ProcessWorker(Generic[T, R]):
     """``factory(*args)`` in a dedicated worker process; ``worker(item)`` runs ``method``
     of it there on ``item`` and returns the result (exceptions are re-raised here).
 
-    Call from one thread at a time (calls are served in order). :attr:`cpu_s` adds up the
+    Call from one thread at a time (calls are served in order); :meth:`submit` sends an item
+    without waiting for it (a :class:`~.fitqueue.Ticket`). :attr:`cpu_s` adds up the
     worker's CPU time per item; :meth:`close` ends the process. ``nice`` > 0 lowers the
     worker's scheduling priority (work that may fall behind and skip, e.g. analyses).
     """
@@ -140,11 +142,19 @@ class ProcessWorker(Generic[T, R]):
         return pool
 
     def __call__(self, item: T) -> R:
+        return self.submit(item).collect()  # type: ignore[no-any-return]
+
+    def submit(self, item: T) -> Ticket:
+        """Send ``item`` to the worker now; the ticket's ``collect()`` returns its result
+        (items are processed one after the other, in the order sent)."""
         with self._lock:
             if self._closed:
                 raise WorkerDied("the worker process was closed")
             pool = self._pool
         future: Future[tuple[R, float]] = pool.submit(_apply, item)
+        return Ticket(future, lambda: self._collect(pool, future))
+
+    def _collect(self, pool: ProcessPoolExecutor, future: Future[tuple[R, float]]) -> R:
         try:
             result, cpu = future.result()
         except BrokenProcessPool as exc:
