@@ -46,9 +46,11 @@ def one_run(duration: float, env: dict[str, str]) -> dict[str, Any]:
         out = Path(tmp) / "run.json"
         load = os.getloadavg()[0]
         cpu0, t0 = _children_cpu(), time.monotonic()
+        # from a directory of its own: ``-m`` puts the working directory first on sys.path,
+        # which from a checkout's root would import that checkout, whatever PYTHONPATH says
         proc = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "run", "--clock", "sim",
                                "--duration", str(duration), "--json", str(out)], env=env,
-                              capture_output=True, text=True, timeout=1800)
+                              cwd=tmp, capture_output=True, text=True, timeout=1800)
         wall, cpu = time.monotonic() - t0, _children_cpu() - cpu0
         if proc.returncode != 0:
             raise SystemExit(f"run failed: {proc.stderr.strip()[-500:]}")
