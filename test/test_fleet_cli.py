@@ -329,26 +329,26 @@ def dask_cluster(tmp_path: Path) -> Iterator[str]:
     (tmp_path / "dask" / "pmsm-sysid.yaml").write_text(yaml.safe_dump(settings))
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1",
                DASK_CONFIG=str(tmp_path / "dask"))
-    procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host",
-                               "127.0.0.1", "--port", "0", "--no-dashboard",
-                               "--scheduler-file", str(info)], env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    quiet = {"env": env, "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    # both started at once: the worker reads the scheduler's address from its file
+    scheduler = subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host",
+                                  "127.0.0.1", "--port", "0", "--no-dashboard",
+                                  "--scheduler-file", str(info)], **quiet)
+    worker = subprocess.Popen([sys.executable, "-m", "dask", "worker", "--scheduler-file",
+                               str(info), "--nthreads", "1", "--nworkers", "1",
+                               "--no-dashboard", "--host", "127.0.0.1",
+                               "--name", "fleet-test-worker"], **quiet)
     try:
         deadline = time.monotonic() + 120
         while not (info.is_file() and info.stat().st_size):
-            assert time.monotonic() < deadline and procs[0].poll() is None
+            assert time.monotonic() < deadline and scheduler.poll() is None
             time.sleep(0.05)
-        address = json.loads(info.read_text())["address"]
-        procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", address,
-                                       "--nthreads", "1", "--nworkers", "1",
-                                       "--no-dashboard", "--host", "127.0.0.1",
-                                       "--name", "fleet-test-worker"], env=env,
-                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-        yield address
+        yield json.loads(info.read_text())["address"]
     finally:
-        for p in reversed(procs):
+        # the worker first, while its scheduler still answers its goodbye (a worker whose
+        # scheduler is gone waits out its reconnection before it exits)
+        for p in (worker, scheduler):
             p.terminate()
-        for p in procs:
             try:
                 p.wait(timeout=30)
             except subprocess.TimeoutExpired:
