@@ -6,6 +6,7 @@ started as their own processes)."""
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
 import shutil
@@ -93,13 +94,20 @@ def test_a_scheduler_that_does_not_answer_is_one_line_before_any_work(tmp_path: 
     address = f"tcp://127.0.0.1:{_free_port()}"
     started = time.monotonic()
     proc = _fleet(str(bag), "--plant", str(NOMINAL), "--out", str(tmp_path / "out"),
-                  "--scheduler", address)
-    _one_line(proc, f"--scheduler {address}: no Dask scheduler answers there within 5 s")
+                  "--scheduler", address, "--connect-timeout", "0.5")
+    _one_line(proc, f"--scheduler {address}: no Dask scheduler answers there within 0.5 s")
     assert time.monotonic() - started < 120  # the connect timeout, not a hang
     assert not (tmp_path / "out").exists()
     proc = _in_process(str(bag), "--plant", str(NOMINAL), "--out", str(tmp_path / "out"),
                        "--scheduler", "tcp://127.0.0.1:notaport")
     _one_line(proc, "--scheduler tcp://127.0.0.1:notaport: not a scheduler address")
+    # without --connect-timeout a scheduler has 5 s to answer, from Python too
+    from pmsm_sysid.cli import build_parser
+
+    args = build_parser().parse_args(["fleet", str(bag), "--plant", str(NOMINAL), "--out",
+                                      str(tmp_path / "out"), "--scheduler", address])
+    assert args.connect_timeout == 5.0
+    assert inspect.signature(ps.fleet).parameters["connect_timeout"].default == 5.0
 
 
 def test_without_the_fleet_extra_the_verb_names_it(tmp_path: Path) -> None:
@@ -122,6 +130,7 @@ def test_without_the_fleet_extra_the_verb_names_it(tmp_path: Path) -> None:
     ({"resume": True}, "resume needs out"), ({"workers": 0}, "workers must be at least 1"),
     ({"baseline": 2}, "baseline must be at least 3"), ({"min_change": 1.5}, "min_change"),
     ({"axis_from": "name"}, "axis_from must be one of"), ({"alpha": 2.0}, "alpha"),
+    ({"connect_timeout": 0}, "connect_timeout must be a positive"),
     ({"plant": "no/such.yaml"}, "no such plant file")])
 def test_bad_api_options_raise_before_any_work(tmp_path: Path, kwargs: dict[str, object],
                                                fragment: str) -> None:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..batch.cluster import CONNECT_TIMEOUT_S
 from ..core.errors import OptionError
 from ..core.fleet import AxisTrend, TrendOptions
 from ..core.recording.spans import MAX_SAMPLES, MIN_SPAN, SPANS
@@ -206,7 +207,8 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
           max_samples: int = MAX_SAMPLES, baseline: int = 8, z: float = 4.0,
           min_change: float = 0.02,
           sim: str | os.PathLike[str] | None = None, sim_namespace: str | None = None,
-          progress: Callable[[FleetProgress], None] | None = None) -> FleetResult:
+          progress: Callable[[FleetProgress], None] | None = None,
+          connect_timeout: float = CONNECT_TIMEOUT_S) -> FleetResult:
     """Fit the physical plant of many recordings, diagnose a reference plant on each, in
     parallel on Dask, and follow every axis's parameters over time with drift alarms.
 
@@ -222,7 +224,8 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
     (a longer recording is used in ten spans spread evenly over it, of a bag only those are
     read) as in :func:`diagnose`; a recording shorter than ``min_duration`` s is a row with
     status error. Runs on ``client`` (a ``dask.distributed.Client`` of yours, left
-    open), on the cluster whose scheduler is at ``scheduler`` (``tcp://HOST:PORT``), or on a
+    open), on the cluster whose scheduler is at ``scheduler`` (``tcp://HOST:PORT``; one that
+    does not answer within ``connect_timeout`` s is refused before any work), or on a
     local cluster of ``workers`` processes (default: one per CPU).
 
     With ``out`` (a new or empty directory, or one an earlier batch wrote) the table is kept
@@ -260,6 +263,7 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
     _check_client(client, scheduler)
     if scheduler is not None:
         check_address(scheduler)
+    timeout = _checks.positive("connect_timeout", connect_timeout)
     n = _default_workers() if workers is None else _checks.count("workers", workers, 1)
     batch = _batch(plant, sim, sim_namespace, namespace, axis_from,
                    (min_duration, alpha, min_share, max_samples),
@@ -270,22 +274,22 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
         raise OptionError("resume needs out (the directory of the batch to resume)")
     resuming = out_path is not None and check_out_dir(out_path, resume=resume, force=force)
     paths = expand(_as_list(recordings))
-    return _run(paths, batch, out_path, resuming, (client, scheduler, n),
+    return _run(paths, batch, out_path, resuming, (client, scheduler, n, timeout),
                 progress or (lambda p: None))
 
 
 def _run(paths: Sequence[Path], batch: _Batch, out: Path | None, resuming: bool,
-         where: tuple[Client | None, str | None, int],
+         where: tuple[Client | None, str | None, int, float],
          report: Callable[[FleetProgress], None]) -> FleetResult:
     """Connect (a scheduler answers, or no work is done), read the recordings, analyse
     what is not done yet, keep every row, then the trends."""
     from ..batch.cluster import check_workers, connect
     from ..batch.store import Store
 
-    client, scheduler, n = where
+    client, scheduler, n, timeout = where
     store = Store(out)
     with ExitStack() as stack:
-        sched = None if scheduler is None else connect(scheduler)  # before any work
+        sched = None if scheduler is None else connect(scheduler, timeout)  # before any work
         if sched is not None:
             stack.callback(sched.close)
         if client is not None:

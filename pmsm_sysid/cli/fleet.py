@@ -29,6 +29,8 @@ OUTPUTS = {"json": "file"}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from ..batch.cluster import CONNECT_TIMEOUT_S
+
     p.add_argument("recordings", nargs="*", metavar="RECORDING",
                    help="rosbag2 recordings: paths, directories (searched) or glob patterns")
     ref = p.add_mutually_exclusive_group(required=True)
@@ -47,6 +49,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                             "CPU)")
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                        help="run on an existing Dask cluster (dask scheduler / dask worker)")
+    p.add_argument("--connect-timeout", type=number(0, None, low_open=True, unit="s"),
+                   default=CONNECT_TIMEOUT_S, metavar="S",
+                   help=f"how long the --scheduler may take to answer (default "
+                        f"{CONNECT_TIMEOUT_S:g} s)")
     p.add_argument("--resume", action="store_true",
                    help="add to the batch in --out: skip recordings already analysed there "
                         "(by content), retry the failed ones")
@@ -125,7 +131,8 @@ def run(args: argparse.Namespace) -> int:
                        min_duration=args.min_duration, alpha=args.alpha,
                        min_share=args.min_share, max_samples=args.max_samples,
                        baseline=args.baseline, z=args.band,
-                       min_change=args.min_change, progress=bars)
+                       min_change=args.min_change, progress=bars,
+                       connect_timeout=args.connect_timeout)
     except KeyboardInterrupt:
         bars.close()
         print(f"fleet: interrupted after {bars.done if bars.stage == 'analysing' else 0} "
