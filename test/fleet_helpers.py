@@ -1,10 +1,11 @@
 """Shared pieces of the fleet tests: simulated recordings of a drive axis (10 s, a drive's
-noise, stamped at a given date)."""
+noise, stamped at a given date), written one by one or in parallel on a Dask cluster."""
 
 from __future__ import annotations
 
 import dataclasses
 import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -31,5 +32,19 @@ def recording(path: Path, plant: ps.Plant, seed: int, day: float, *,
     """A recording of ``plant`` under the APRBS excitation (random steps moving the axis
     over its stroke), starting ``day`` days after :data:`EPOCH`."""
     rec = ps.simulate(plant, excitation="aprbs", duration=duration, seed=seed)
+    return stamped(rec, path, day, namespace)
+
+
+def stamped(rec: ps.Recording, path: Path, day: float, namespace: str) -> Path:
+    """``rec`` written to ``path`` as starting ``day`` days after :data:`EPOCH`."""
     rec = dataclasses.replace(rec, t=rec.t + EPOCH + day * DAY)
     return ps.write_bag(rec, path, namespace=namespace)
+
+
+def in_parallel(client: Any, make: Callable[..., Path],
+                calls: Sequence[dict[str, Any]]) -> list[Path]:
+    """``[make(**kwargs) for kwargs in calls]``, run on the workers of ``client`` (each
+    recording is simulated and written by one of them)."""
+    futures = [client.submit(make, pure=False, **kwargs) for kwargs in calls]
+    paths: list[Path] = client.gather(futures)
+    return paths

@@ -3,22 +3,42 @@ one stable, one whose Coulomb friction creeps up to +30 % (a rail running dry), 
 grows a cogging force (a chipped magnet), one 5 % heavier (a new fixture). Each change is
 alarmed at the recording where it happened, the stable axis never; the table, alarms.json
 and the page of trends hold what the contract says; the caller's Dask client did the work.
+
+Controls: an axis that does not change raises no alarm, whatever the noise and the loop.
+Three stable axes, the same drive (5 N of Coulomb friction) recorded daily for 10 s, twelve
+days each: open loop under the APRBS test motion with a 2 N noise on the thrust reading
+itself (a force sensor, not the drive's command); under a PID position loop following a
+two-sine move with an APRBS of 6 N injected into the controller's output; and under the
+same loop with the thrust reading's noise too. Noise is not physics: every row is analysed
+(status ok, the fitted mass and friction near the truth) and no parameter of any axis
+leaves its band.
+
+Both fleets run on the same caller's cluster (its workers also write the recordings).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from fleet_helpers import DAY, EPOCH, NOMINAL, drive, recording
+from fleet_helpers import DAY, EPOCH, NOMINAL, drive, in_parallel, recording, stamped
 
 import pmsm_sysid as ps
+from pmsm_sysid.core.physics.closed_loop import (
+    PositionLoop,
+    reference_trajectory,
+    run_closed_loop,
+)
+from pmsm_sysid.core.physics.excitation import make_excitation
+from pmsm_sysid.core.physics.motor import simulate
 from pmsm_sysid.core.physics.plant import Cogging, CoulombFriction
 from pmsm_sysid.plots.fleet import axis_trends
 
@@ -42,30 +62,31 @@ def _name(axis: str, day: int) -> str:
 
 
 @pytest.fixture(scope="module")
-def bags(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    root = tmp_path_factory.mktemp("fleet") / "recordings"
-    root.mkdir()
-    seed = 1000
-    for k, (axis, plants) in enumerate(FLEET.items()):
-        for day, plant in enumerate(plants):  # each axis at its own hour of the day
-            seed += 1
-            recording(root / _name(axis, day), plant, seed=seed, day=day + 0.1 * k,
-                      namespace=axis)
-    return root
-
-
-@pytest.fixture(scope="module")
 def client() -> Iterator[Any]:
     import dask
     from dask.distributed import Client, LocalCluster
 
     from pmsm_sysid.batch.cluster import WORKER_CONFIG
 
-    # a caller's cluster with the worker settings docs/fleet.md recommends
+    # a caller's cluster with the worker settings docs/fleet.md recommends, for both fleets
     with dask.config.set(WORKER_CONFIG), LocalCluster(
             n_workers=2, threads_per_worker=1, processes=True,
             dashboard_address=":0") as cluster, Client(cluster) as c:
         yield c
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory: pytest.TempPathFactory, client: Any) -> Path:
+    root = tmp_path_factory.mktemp("fleet") / "recordings"
+    root.mkdir()
+    calls, seed = [], 1000
+    for k, (axis, plants) in enumerate(FLEET.items()):
+        for day, plant in enumerate(plants):  # each axis at its own hour of the day
+            seed += 1
+            calls.append({"path": root / _name(axis, day), "plant": plant, "seed": seed,
+                          "day": day + 0.1 * k, "namespace": axis})
+    in_parallel(client, recording, calls)
+    return root
 
 
 @pytest.fixture(scope="module")
@@ -184,3 +205,86 @@ def test_the_callers_client_did_the_work_and_stays_open(
     assert len(rows) == result.table.num_rows == result.analysed
     assert client.status == "running"
     assert len({t["worker"] for t in rows}) == 2  # both workers took recordings
+
+
+# ----------------------------------------------------------------------- controls
+
+DAYS = 12
+SECONDS = 10.0
+TRUTH = drive()
+NOISY = dataclasses.replace(TRUTH, noise=dataclasses.replace(TRUTH.noise, thrust_std=2.0))
+
+
+def _open_loop(plant: ps.Plant, seed: int) -> Any:
+    n = round(SECONDS * plant.sample_rate_hz)
+    return simulate(plant, make_excitation("aprbs", n, plant.sample_rate_hz, seed=seed),
+                    seed=seed)
+
+
+def _closed_loop(plant: ps.Plant, seed: int) -> Any:
+    fs = plant.sample_rate_hz
+    n = round(SECONDS * fs)
+    ref = reference_trajectory(n, fs, (0.02, 0.004), (0.4, 1.7))
+    loop = PositionLoop.for_bandwidth(dataclasses.replace(plant, noise=None), 15.0)
+    inject = make_excitation("aprbs", n, fs, seed=seed, amplitude_n=6.0)
+    return run_closed_loop(plant, ref, loop, seed=seed, injection=inject)
+
+
+AXES = {"/open_thrust_noise": (NOISY, _open_loop), "/closed": (TRUTH, _closed_loop),
+        "/closed_thrust_noise": (NOISY, _closed_loop)}
+
+
+def _control_recording(path: Path, axis: str, seed: int, day: float) -> Path:
+    plant, make = AXES[axis]
+    return stamped(make(plant, seed), path, day, axis)
+
+
+@pytest.fixture(scope="module")
+def controls(tmp_path_factory: pytest.TempPathFactory,
+             client: Any) -> tuple[ps.FleetResult, dict[str, Any]]:
+    root = tmp_path_factory.mktemp("fleet_controls")
+    (root / "recordings").mkdir()
+    calls, seed = [], 7000
+    for k, axis in enumerate(AXES):
+        for day in range(DAYS):
+            seed += 1
+            calls.append({"path": root / "recordings" / f"{axis.strip('/')}_{day:02d}",
+                          "axis": axis, "seed": seed, "day": day + 0.1 * k})
+    in_parallel(client, _control_recording, calls)
+    result = ps.fleet(str(root / "recordings"), plant=NOMINAL, client=client,
+                      out=root / "out")
+    return result, result.table.to_pydict()
+
+
+@pytest.mark.timeout(3600)
+def test_every_control_recording_is_analysed_near_the_truth(
+        controls: tuple[ps.FleetResult, dict[str, Any]]) -> None:
+    result, table = controls
+    assert result.table.num_rows == DAYS * len(AXES)
+    assert set(table["status"]) == {"ok"}, [e for e in table["error"] if e]
+    axis = np.array(table["axis"])
+    mass, mass_std = np.array(table["mass_kg"]), np.array(table["mass_kg.std"])
+    coulomb = np.array(table["coulomb_friction.amplitude_n"], dtype=float)
+    coulomb_std = np.array(table["coulomb_friction.amplitude_n.std"], dtype=float)
+    assert np.all(coulomb_std > 0) and np.all(mass_std < 0.15 * TRUTH.mass_kg), mass_std
+    # a clean thrust reading under the loop: the mass within 4 of its stated standard
+    # errors of the truth, the Coulomb amplitude within 5 %
+    clean = axis == "/closed"
+    assert np.all(np.abs(mass - TRUTH.mass_kg)[clean] < 4 * mass_std[clean]), mass[clean]
+    assert np.all(np.abs(coulomb[clean] / 5.0 - 1) < 0.05), coulomb[clean]
+    # a noisy thrust reading (2 N): a day's fit may be off by more than its stated error
+    # says (a known limit of fit-plant under such noise: up to +25 % in mass under the
+    # loop, -19 % in Coulomb friction open loop), never by a sign or a factor; the
+    # baseline's spread, not the stated error, sets the axis's band (next test)
+    assert np.all(np.abs(mass / TRUTH.mass_kg - 1) < 0.35), mass
+    assert np.all(np.abs(coulomb / 5.0 - 1) < 0.25), coulomb
+    assert np.median(np.abs(coulomb / 5.0 - 1)) < 0.05, coulomb
+
+
+@pytest.mark.timeout(3600)
+def test_a_stable_axis_raises_no_alarm_whatever_the_noise_and_the_loop(
+        controls: tuple[ps.FleetResult, dict[str, Any]]) -> None:
+    result, _ = controls
+    assert result.alarms == []
+    assert {t.axis: t.state for t in result.trends} == dict.fromkeys(AXES, "ok")
+    assert all(t.recordings == DAYS for t in result.trends)
