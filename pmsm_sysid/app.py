@@ -235,7 +235,10 @@ class Pipeline:
         rec = self.recorder
         want = (self.sim.published if self.sim is not None else
                 self.identifier.engine.samples_received if self.identifier is not None else 0)
-        self._spin_while(lambda: rec.alive and rec.samples_recorded < want, timeout_s)
+        # the input topics that came (a speed derived from position never does)
+        came = (rec.inputs if self.sim is not None or self.identifier is None
+                else list(self.identifier.input_report().arrived))
+        self._spin_while(lambda: rec.alive and rec.samples_recorded_of(came) < want, timeout_s)
         for node in self.nodes.values():
             for pub in node.publishers:
                 if pub.topic_name in rec.topics:

@@ -25,7 +25,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import signal
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -156,6 +156,13 @@ class RecorderProcess:
     def samples_recorded(self) -> int:
         """Samples recorded so far: the fewest messages over the input topics."""
         return int(min(self._progress))
+
+    def samples_recorded_of(self, topics: Collection[str]) -> int:
+        """Samples recorded so far of the input topics among ``topics`` (e.g. those that
+        arrived: a speed derived from position never comes, and is no part of a sample):
+        the fewest messages over them; over every input topic when none is among them."""
+        counts = [n for t, n in zip(self.inputs, self._progress, strict=True) if t in topics]
+        return int(min(counts)) if counts else self.samples_recorded
 
     @property
     def alive(self) -> bool:
