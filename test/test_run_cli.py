@@ -1,7 +1,8 @@
 """``pmsm-sysid run`` as a user runs it: summary JSON, clean SIGTERM, one-line errors.
 
-The two runs are processes started side by side by one module fixture (the five-second run
-mostly waits for real time); the refused inputs are checked in this process."""
+The run sent SIGTERM is a process of its own, started by a module fixture; the five-second
+run (it ends by itself: its exit status is ``main``'s) runs in this process meanwhile, as
+do the refused inputs."""
 
 from __future__ import annotations
 
@@ -32,10 +33,9 @@ def _env(ros_env: int, tmp_path: Path) -> dict[str, str]:
 
 @dataclass(frozen=True)
 class Runs:
-    """The module's two runs, started side by side (each on a ROS domain of its own): the
-    five-second run mostly waits for real time, which the other run uses."""
+    """The module's run sent SIGTERM, a process started (on a ROS domain of its own) before
+    the five-second run, which mostly waits for real time, runs in this process."""
 
-    five_seconds: subprocess.Popen[str]
     sigterm: Future[tuple[int, str, Path, Path]]  # exit code, stderr, bag, summary JSON
 
 
@@ -44,26 +44,18 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Runs]:
     from pmsm_sysid.testing.pytest_plugin import next_domain_id
 
     tmp = tmp_path_factory.mktemp("runs")
-    (tmp / "five").mkdir()
     (tmp / "sigterm").mkdir()
-    five = subprocess.Popen([*CLI, "run", "--duration", "5", "--json", "-"],
-                            env=_env(next_domain_id(), tmp / "five"), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
     with ThreadPoolExecutor(1) as pool:
-        try:
-            yield Runs(five, pool.submit(_sigterm_mid_run, next_domain_id(), tmp / "sigterm"))
-        finally:
-            if five.poll() is None:
-                five.kill()
-                five.communicate()
+        yield Runs(pool.submit(_sigterm_mid_run, next_domain_id(), tmp / "sigterm"))
 
 
 @pytest.mark.slow
 @pytest.mark.xdist_group("run_cli")
-def test_run_for_five_seconds_prints_the_summary(runs: Runs) -> None:
-    stdout, stderr = runs.five_seconds.communicate(timeout=180)
-    proc = subprocess.CompletedProcess(runs.five_seconds.args, runs.five_seconds.returncode,
-                                       stdout, stderr)
+def test_run_for_five_seconds_prints_the_summary(runs: Runs, ros_env: int,
+                                                 capfd: pytest.CaptureFixture[str]) -> None:
+    from reliability_helpers import ros_verb
+
+    proc = ros_verb(capfd, "run", "--duration", "5", "--json", "-")
     assert proc.returncode == 0, proc.stderr
     s = json.loads(proc.stdout)
     assert set(s) >= KEYS
