@@ -20,6 +20,9 @@ from pmsm_sysid.core.errors import BagError
 N = 12_000  # per topic: 36 000 records of ~100 bytes, several 1 MB chunks
 TOPICS = {"/m/thrust": tp.THRUST_TYPE, "/m/speed": tp.SPEED_TYPE,
           "/m/position": tp.POSITION_TYPE}
+# One test process builds the two bags (module fixture) and reads them in every test: under
+# ``--dist loadgroup`` the tests were spread over both processes and each built both bags.
+pytestmark = pytest.mark.xdist_group("bagio_mcap_messages")
 
 
 def _bag(path: Path, compressed: bool) -> Path:
