@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
-import sys
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_inprocess import invoke
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
@@ -376,12 +375,13 @@ def test_wrong_message_type_on_topic(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("verb", ["identify", "import-mat"])
 def test_bad_inputs_exit_2_with_one_line_from_cli(tmp_path: Path, verb: str) -> None:
-    """Through the console script: a directory that is neither a bag nor a .mat file."""
+    """Through the command line (``pmsm_sysid.cli.main`` in this process, its exit status,
+    stdout and stderr as the console script gives them; the console script itself exits 2
+    as a process in test_import_mat.py and test_install.py): a directory that is neither a
+    bag nor a .mat file."""
     (tmp_path / "notabag").mkdir()
-    script = Path(sys.executable).with_name("pmsm-sysid")
     extra = ["--out", str(tmp_path / "o")] if verb == "import-mat" else []
-    out = subprocess.run([str(script), verb, str(tmp_path / "notabag"), *extra],
-                         capture_output=True, text=True, timeout=60)
+    out = invoke(verb, str(tmp_path / "notabag"), *extra)
     assert out.returncode == 2 and out.stdout == ""
     assert len(out.stderr.strip().splitlines()) == 1 and "Traceback" not in out.stderr
     if verb == "identify":
