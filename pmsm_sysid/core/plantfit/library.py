@@ -111,15 +111,21 @@ def raw_columns(e: Effect, data: EquationData) -> FloatArray:
         return x[:, None]
     if e.name == "cogging":
         k = 2.0 * math.pi / e.pitch_m
-        cols = []
-        for h in e.orders:
+        out = np.empty((len(x), 2 * len(e.orders)))  # what column_stack of the pairs gives
+        for i, h in enumerate(e.orders):
             g = travel_gain(data.v, data.period, h / e.pitch_m, data.mode)
-            cols += [g * np.sin(h * k * x), g * np.cos(h * k * x)]
-        return np.column_stack(cols)
+            arg = h * k * x  # one phase for both, the same bits as computed twice
+            np.multiply(g, np.sin(arg), out=out[:, 2 * i])
+            np.multiply(g, np.cos(arg), out=out[:, 2 * i + 1])
+        return out
     if e.name == "thrust_ripple":
         k = 2.0 * math.pi / e.pitch_m
         g = travel_gain(data.v, data.period, 1.0 / e.pitch_m, data.mode) * data.regressor_force
-        return np.column_stack([g * np.sin(k * x), g * np.cos(k * x)])
+        arg = k * x
+        out = np.empty((len(x), 2))
+        np.multiply(g, np.sin(arg), out=out[:, 0])
+        np.multiply(g, np.cos(arg), out=out[:, 1])
+        return out
     if e.name == "thrust_lag" and not e.dynamic:
         d = data.per_interval(lambda c: np.diff(c, prepend=c[0]), data.cmd) / data.period
         return data.pair(d)[:, None]
