@@ -40,11 +40,11 @@ lint: $(STAMP)
 
 # the whole suite (what CI runs); the browser test's Chromium is installed first. Three test
 # processes on two cores: the live ROS tests spend much of their time waiting on replays and
-# discovery, and a third process computes meanwhile (5:14 against 5:55 with two, idle).
+# discovery, and a third process computes meanwhile (three: 4:09 idle; four: 4:15; two were the slowest).
 test: $(STAMP) lint browser
 	ROS_LOG_DIR=$$(mktemp -d) $(PY) -m pytest -n 3 --dist loadgroup -q test
 
-# the edit-test loop: lint + the tests that need no ROS and are not slow (67-74 s on 2 idle cores)
+# the edit-test loop: lint + the tests that need no ROS and are not slow (about 58 s on 2 cores)
 check: $(STAMP) lint
 	$(PY) -m pytest -n 2 --dist loadgroup -q --without-ros -m "not slow" test
 
