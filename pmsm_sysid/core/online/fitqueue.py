@@ -170,12 +170,7 @@ class FitWorker(Generic[T, R]):
     def _run(self, item: T) -> None:
         """Process one item here and deliver its result (``ahead`` 1)."""
         c0 = self._cpu_clock()
-        try:
-            result = self._fn(item)
-        except Exception as exc:  # reported, counted; the thread must keep running
-            self._failed_item(item, exc)
-        else:
-            self._on_result(item, result)
+        self._deliver(item, lambda: self._fn(item))
         self._done(item, self._cpu_clock() - c0)
 
     def _hand_over(self, item: T, submit: Callable[[T], Ticket],
@@ -194,15 +189,19 @@ class FitWorker(Generic[T, R]):
     def _collect(self, item: T, ticket: Ticket) -> None:
         """Deliver a handed-over item's result; its CPU is what passed since the previous
         delivery (items overlap, so each interval is counted once)."""
+        self._deliver(item, ticket.collect)
+        now = self._cpu_clock()
+        cpu, self._mark = now - self._mark, now
+        self._done(item, cpu)
+
+    def _deliver(self, item: T, result_of: Callable[[], R]) -> None:
+        """``on_result(item, result_of())``, or ``on_error`` with what it raised."""
         try:
-            result = ticket.collect()
+            result = result_of()
         except Exception as exc:  # reported, counted; the thread must keep running
             self._failed_item(item, exc)
         else:
             self._on_result(item, result)
-        now = self._cpu_clock()
-        cpu, self._mark = now - self._mark, now
-        self._done(item, cpu)
 
     def _failed_item(self, item: T, exc: Exception) -> None:
         with self._lock:
