@@ -62,8 +62,8 @@ def sosfiltfilt(sos: FloatArray, x: FloatArray, axis: int = -1) -> FloatArray:
         return out
     axis %= x.ndim
     n_sections, p = sos.shape[0], _padlen(sos)
-    zi = _zi(np.ascontiguousarray(sos).tobytes(), n_sections)
     sos_c = np.ascontiguousarray(sos)
+    zi = _zi(sos_c.tobytes(), n_sections)
     rows = np.moveaxis(x, axis, -1).reshape(-1, x.shape[axis])  # (signals, samples)
     n = rows.shape[1]
     ext = np.empty((rows.shape[0], n + 2 * p))  # row-major, as SciPy's copy is
