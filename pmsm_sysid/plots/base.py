@@ -72,7 +72,10 @@ def save(plot: Plot, out_dir: str | Path, dpi: int = DPI, colours: int = 256) ->
 
     The image is stored with a palette of ``colours`` (Pillow, matplotlib's own image
     library): line plots and contour maps look the same at a third of the size.
-    ``colours=0`` keeps full RGBA.
+    ``colours=0`` keeps full RGBA. The PNG is compressed at zlib's default level: the
+    highest level (Pillow's ``optimize``) took about 7x the encoding time (0.37 s against
+    0.05 s for the nine figures of a recording's report) for files 3-15 % smaller, with
+    the same pixels.
     """
     path = Path(out_dir) / f"{plot.name}.png"
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -85,5 +88,5 @@ def save(plot: Plot, out_dir: str | Path, dpi: int = DPI, colours: int = 256) ->
     if colours:
         rgb = rgb.quantize(colors=colours, method=PILImage.Quantize.MEDIANCUT,
                            dither=PILImage.Dither.NONE)
-    rgb.save(path, format="PNG", optimize=True)
+    rgb.save(path, format="PNG")
     return path
