@@ -41,8 +41,15 @@ lint: $(STAMP)
 # the whole suite (what CI runs); the browser test's Chromium is installed first. Three test
 # processes on two cores: the live ROS tests spend much of their time waiting on replays and
 # discovery, and a third process computes meanwhile (three: 4:09 idle; four: 4:15; two were the slowest).
-test: $(STAMP) lint browser
-	ROS_LOG_DIR=$$(mktemp -d) $(PY) -m pytest -n 3 --dist loadgroup -q test
+# mypy runs beside pytest (on a fresh clone it checks from scratch: about 18 s of one core,
+# which the test processes' waits leave free); its output follows the tests'.
+test: $(STAMP) browser
+	$(VENV)/bin/ruff check pmsm_sysid test bench scripts
+	@log=$$(mktemp); echo "$(VENV)/bin/mypy pmsm_sysid (beside the tests)"; \
+	$(VENV)/bin/mypy pmsm_sysid >$$log 2>&1 & typing=$$!; \
+	ROS_LOG_DIR=$$(mktemp -d) $(PY) -m pytest -n 3 --dist loadgroup -q test; tests=$$?; \
+	wait $$typing; typed=$$?; echo "mypy pmsm_sysid:"; cat $$log; rm -f $$log; \
+	test $$tests -eq 0 -a $$typed -eq 0
 
 # the edit-test loop: lint + the tests that need no ROS and are not slow (about 58 s on 2 cores)
 check: $(STAMP) lint
