@@ -22,6 +22,7 @@ from .common import (
     connection_args,
     storage_plugin,
 )
+from .mcap_block import append_block, block_writer
 
 
 def _stamps_ns(t: FloatArray) -> np.ndarray[Any, np.dtype[np.int64]]:
@@ -66,8 +67,14 @@ class RecordingWriter:
                                f"recording {len(ns)}")
         arrays = [extra[name] if name in extra else rec.signal(name)
                   for _, _, name in self._conns]
+        storage = block_writer(self._writer)
         for start in range(0, len(ns), WRITE_BLOCK):
             stop = start + WRITE_BLOCK
+            if storage is not None:
+                append_block(self._writer, storage, [c for c, _, _ in self._conns],
+                             [t for _, t, _ in self._conns], FRAME_ID, ns[start:stop],
+                             [np.asarray(a[start:stop], dtype=np.float64) for a in arrays])
+                continue
             columns = [(conn, msgtype, np.asarray(values[start:stop], dtype=np.float64).tolist())
                        for (conn, msgtype, _), values in zip(self._conns, arrays, strict=True)]
             for k, stamp in enumerate(ns[start:stop].tolist()):
