@@ -64,10 +64,8 @@ def _chunk_records(raw: bytes, channels: Collection[int], start: int, stop: int,
     return out
 
 
-def _chunk(storage: McapReader, chunk: ChunkInfo, channels: Collection[int], start: int,
-           stop: int) -> Iterator[_Item]:
-    """The chunk's announcement, then its messages sorted by log time."""
-    yield chunk.message_start_time, 0, 0, -1, b""
+def chunk_bytes(storage: McapReader, chunk: ChunkInfo) -> bytes:
+    """The records of ``chunk``, decompressed and checked as ``rosbags`` does."""
     bio = storage.bio
     assert bio is not None
     bio.seek(chunk.chunk_start_offset + 9 + 24)
@@ -76,7 +74,16 @@ def _chunk(storage: McapReader, chunk: ChunkInfo, channels: Collection[int], sta
     data = bio.read(chunk.compressed_size)
     if len(crc) != 4 or len(data) != chunk.compressed_size:
         raise _Unreadable("truncated chunk")
-    raw = decompress(data, chunk.compression, chunk.uncompressed_size, _U32.unpack(crc)[0])
+    raw: bytes = decompress(data, chunk.compression, chunk.uncompressed_size,
+                            _U32.unpack(crc)[0])
+    return raw
+
+
+def _chunk(storage: McapReader, chunk: ChunkInfo, channels: Collection[int], start: int,
+           stop: int) -> Iterator[_Item]:
+    """The chunk's announcement, then its messages sorted by log time."""
+    yield chunk.message_start_time, 0, 0, -1, b""
+    raw = chunk_bytes(storage, chunk)
     found = _chunk_records(raw, channels, start, stop)
     found.sort(key=lambda m: m[0])
     offset = chunk.chunk_start_offset

@@ -13,7 +13,7 @@ import numpy as np
 from .. import topics as tp
 from ..core.errors import BagError, DataError
 from ..core.recording.align import align_streams, robust_period
-from . import mcap_messages
+from . import mcap_arrays, mcap_messages
 from .cdr import decode_stamped
 from .common import MAX_NONFINITE_LISTED, LoadedRecording, RawMessage, open_reader, typestore
 
@@ -150,6 +150,13 @@ def _read_triple(reader: Any, chosen: dict[str, str], until: int | None,
     # the fast path only for the stock definitions (same type hash as ROS 2 Jazzy, or none)
     fast = {c.id for c in conns if c.digest in ("", store.hash_rihs01(c.msgtype))}
     start, stop, lo, hi = window or _WHOLE
+    if conns and len(fast) == len(conns):  # a chunk at a time (mcap_arrays)
+        names = list(streams)
+        arrays = mcap_arrays.read_stamped(
+            reader, conns, {c.id: names.index(by_topic[c.topic]) for c in conns},
+            len(names), (start, stop, lo, hi), until, READ_MARGIN)
+        if arrays is not None:
+            return dict(zip(names, arrays[0], strict=True)), arrays[1]
     for conn, _, data in mcap_messages.messages(reader, conns, start, stop):
         stamps, values = streams[by_topic[conn.topic]]
         got = decode_stamped(data) if conn.id in fast else None
