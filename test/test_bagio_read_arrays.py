@@ -17,9 +17,10 @@ import pmsm_sysid.bagio.mcap_arrays as mcap_arrays
 from pmsm_sysid import topics as tp
 from pmsm_sysid.bagio import mcap_messages, read_recording, write_recording
 from pmsm_sysid.bagio.cdr import encode_stamped
-from pmsm_sysid.bagio.common import DEFAULT_QOS, connection_args, open_reader
+from pmsm_sysid.bagio.common import DEFAULT_QOS, connection_args, open_reader, typestore
 from pmsm_sysid.core.recording.signals import Recording, derive_speed
 
+String = typestore().types["std_msgs/msg/String"]
 N = 12_000
 TOPICS = {"/pmsm/thrust": tp.THRUST_TYPE, "/pmsm/speed": tp.SPEED_TYPE,
           "/pmsm/position": tp.POSITION_TYPE}
@@ -29,7 +30,9 @@ pytestmark = pytest.mark.xdist_group("bagio_read_arrays")
 def _bag(path: Path, overlap: bool) -> Path:
     """Log times in 10 ms buckets, backwards inside each (ties across topics, reordered
     samples), a chunk closed every 2000 samples; ``overlap``: a sample logged 5 s late
-    every 4000, so chunks overlap in time."""
+    every 4000, so chunks overlap in time. A text topic of messages of other sizes now and
+    then (as a run's models are) breaks the chunks' cycle of record sizes, and so does a
+    sample written in another order of topics."""
     rng = np.random.default_rng(9)
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         conns = []
@@ -37,12 +40,21 @@ def _bag(path: Path, overlap: bool) -> Path:
             msgdef, digest = connection_args(msgtype)
             conns.append((writer.add_connection(topic, msgtype, msgdef=msgdef, rihs01=digest,
                                                 offered_qos_profiles=[DEFAULT_QOS]), msgtype))
+        text = writer.add_connection("/pmsm/model", "std_msgs/msg/String",
+                                     typestore=typestore())
         for k in range(N):
+            if k % 700 == 350 and k < 6000:  # in the first three chunks
+                data = typestore().serialize_cdr(String(data="m" * (k % 97)),
+                                                 "std_msgs/msg/String")
+                writer.write(text, 10**9 + (k // 5) * 10_000_000, data)
             stamp = 10**9 + k * 2_000_000
             log = 10**9 + (k // 5) * 10_000_000 + (4 - k % 5) * 1_000_000
             if overlap and k % 4000 == 3999:
                 log -= 5 * 10**9
-            for conn, msgtype in conns:
+            # now and then a sample's topics in another order: the same bytes in all, in
+            # records of other sizes where the chunk's cycle predicts them
+            swap = k % 997 == 500 and 6000 <= k < 10_000  # the next two; the last is plain
+            for conn, msgtype in conns[::-1] if swap else conns:
                 writer.write(conn, log, encode_stamped(msgtype, stamp, "pmsm",
                                                        float(rng.standard_normal())))
             if k % 2000 == 1999:
@@ -101,14 +113,32 @@ def test_a_chunk_at_a_time_gives_the_message_by_message_read(
 def test_chunks_that_overlap_in_time_are_read_message_by_message(
         bags: dict[str, Path], monkeypatch: pytest.MonkeyPatch) -> None:
     with open_reader(bags["overlap"]) as reader:
-        conns = list(reader.connections)
+        conns = [c for c in reader.connections if c.topic in TOPICS]
         assert mcap_arrays.read_stamped(reader, conns, {c.id: 0 for c in conns}, 1,
                                         (None, None, 0, 2**62), None, 0) is None
     with open_reader(bags["in_order"]) as reader:
-        conns = list(reader.connections)
+        conns = [c for c in reader.connections if c.topic in TOPICS]
         assert len(reader.storage.storages[0].chunks) >= 6  # type: ignore[attr-defined]
         got = mcap_arrays.read_stamped(reader, conns, {c.id: 0 for c in conns}, 1,
                                        (None, None, 0, 2**62), None, 0)
         assert got is not None and len(got[0][0][0]) == 3 * N
     fast = _read(bags["overlap"], False, monkeypatch)
     assert len(fast.recording) == N
+
+
+def test_both_ways_of_walking_a_chunk_are_taken(bags: dict[str, Path],
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """The in-order bag has chunks whose records follow one cycle of sizes (predicted and
+    checked at once), and chunks where another record or order breaks it (walked one by
+    one): the comparisons above cover both."""
+    outcomes: list[bool] = []
+    predicted = mcap_arrays._predicted
+
+    def counted(*args: Any) -> Any:
+        got = predicted(*args)
+        outcomes.append(got is not None)
+        return got
+
+    monkeypatch.setattr(mcap_arrays, "_predicted", counted)
+    read_recording(bags["in_order"])
+    assert True in outcomes and False in outcomes, outcomes

@@ -29,31 +29,83 @@ Stream = tuple["array[int]", "array[float]"]
 _ENC = (0x00, 0x01)  # CDR little-endian, as :func:`.cdr.decode_stamped` requires
 
 
+#: Records walked one by one before the rest of a chunk is predicted from their sizes.
+PROBE = 48
+
+
 def _walk(raw: bytes, channels: Mapping[int, int], start: int, stop: int,
           ) -> tuple[np.ndarray, ...]:
     """(log time, stream, payload start, payload end) of the chunk's messages on
     ``channels`` (channel -> stream index) logged in [start, stop), in record order."""
-    logs, streams, begins, ends = array("q"), array("q"), array("q"), array("q")
-    pos, size, head = 0, len(raw), _MESSAGE.size
-    unpack_u64, unpack_msg = _U64.unpack_from, _MESSAGE.unpack_from
-    while pos < size:  # the framing rosbags walks (mcap_messages._chunk_records)
+    buf = np.frombuffer(raw, dtype=np.uint8)
+    starts, ends = _message_records(raw, buf)
+    bodies = starts + 9
+    if np.any(ends - bodies < _MESSAGE.size):
+        raise _Unreadable("truncated message record")
+    channel = _gather(buf, bodies, "<u2").astype(np.int64)
+    log = _gather(buf, bodies + 6, "<u8")
+    known = np.array(sorted(channels), dtype=np.int64)
+    keep = np.isin(channel, known) & (log >= start) & (log < stop)
+    lookup = np.zeros(int(known.max()) + 1 if len(known) else 1, dtype=np.int64)
+    for cid, stream in channels.items():
+        lookup[cid] = stream
+    return (log[keep].astype(np.int64), lookup[channel[keep]],
+            bodies[keep] + _MESSAGE.size, ends[keep])
+
+
+def _message_records(raw: bytes, buf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start and end of every message record of the chunk, by the framing rosbags walks
+    (:func:`.mcap_messages._chunk_records`): the first :data:`PROBE` records one by one,
+    then, when the last ones repeat a cycle of sizes, the rest predicted from it and
+    checked all at once (each predicted record a message whose length field is the one
+    predicted, the last ending where the chunk does: then the walk visits exactly
+    those); else one by one to the end."""
+    found: list[tuple[int, int]] = []
+    sizes: list[int] = []
+    pos, size = 0, len(raw)
+    while pos < size:
+        if len(sizes) == PROBE:
+            rest = _predicted(buf, pos, sizes)
+            if rest is not None:
+                head = np.array(found, dtype=np.int64).reshape(-1, 2)
+                return (np.concatenate((head[:, 0], rest[0])),
+                        np.concatenate((head[:, 1], rest[1])))
         if pos + 9 > size:
             raise _Unreadable("truncated record length")
-        op = raw[pos]
-        body = pos + 9
-        pos = body + unpack_u64(raw, pos + 1)[0]
-        if op != _OP_MESSAGE:
-            continue
-        if pos > size or pos - body < head:
-            raise _Unreadable("truncated message record")
-        channel, _, log_time, _ = unpack_msg(raw, body)
-        if start <= log_time < stop and channel in channels:
-            logs.append(log_time)
-            streams.append(channels[channel])
-            begins.append(body + head)
-            ends.append(pos)
-    return tuple(np.frombuffer(a, dtype=np.int64) if len(a) else np.zeros(0, np.int64)
-                 for a in (logs, streams, begins, ends))
+        end = pos + 9 + _U64.unpack_from(raw, pos + 1)[0]
+        if raw[pos] == _OP_MESSAGE:
+            if end > size:
+                raise _Unreadable("truncated message record")
+            found.append((pos, end))
+        sizes.append(end - pos)
+        pos = end
+    both = np.array(found, dtype=np.int64).reshape(-1, 2)
+    return both[:, 0].copy(), both[:, 1].copy()
+
+
+def _predicted(buf: np.ndarray, pos: int, sizes: list[int],
+               ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The records from ``pos`` to the chunk's end if they continue the cycle of the last
+    ``sizes`` (see :func:`_message_records`); None if they do not."""
+    tail = sizes[-PROBE // 2:]
+    period = next((p for p in range(1, 9)
+                   if all(tail[i] == tail[i - p] for i in range(p, len(tail)))), None)
+    if period is None:
+        return None
+    cycle = np.array(tail[-period:], dtype=np.int64)
+    remaining = len(buf) - pos
+    whole, left = divmod(remaining, int(cycle.sum()))
+    partial = np.concatenate(([0], np.cumsum(cycle)))
+    if left not in partial:
+        return None
+    n = whole * period + int(np.flatnonzero(partial == left)[0])
+    step = np.tile(cycle, whole + 1)[:n]
+    ends = pos + np.cumsum(step)
+    starts = ends - step
+    if n == 0 or ends[-1] != len(buf) or np.any(buf[starts] != _OP_MESSAGE) \
+            or np.any(_gather(buf, starts + 1, "<u8") != (step - 9).astype(np.uint64)):
+        return None
+    return starts, ends
 
 
 def _gather(buf: np.ndarray, at: np.ndarray, dtype: str) -> np.ndarray:
