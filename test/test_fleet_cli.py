@@ -438,3 +438,25 @@ def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_thresh
         got = client.run(_worker_settings)
     assert list(got.values()) == [(False, None, "1")]
     assert defaults() == (True, 65536)  # left as they were
+
+
+def test_a_local_cluster_starts_no_more_workers_than_recordings_to_analyse(
+        five_recordings: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A worker started for nothing costs its start: two recordings left (of five, three
+    already in the table) on ``--workers 4`` start two."""
+    import pmsm_sysid.batch.cluster as cluster
+
+    asked: list[int] = []
+    real = cluster.local_cluster
+
+    def counted(workers: int) -> Any:
+        asked.append(workers)
+        return real(workers)
+
+    monkeypatch.setattr(cluster, "local_cluster", counted)
+    out = tmp_path / "out"
+    ps.fleet([str(p) for p in five_recordings[:3]], plant=str(NOMINAL), out=out, workers=1)
+    got = ps.fleet([str(p) for p in five_recordings], plant=str(NOMINAL), out=out,
+                   workers=4, resume=True)
+    assert asked == [1, 2]
+    assert got.table.num_rows == 5

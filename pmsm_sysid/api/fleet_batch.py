@@ -150,7 +150,10 @@ def _analyse(client: Client | None, scheduler_client: Client | None, workers: in
                              progress.skipped))
 
     with ExitStack() as stack:
-        c = client or scheduler_client or stack.enter_context(local_cluster(workers))
+        # no more local workers than recordings to analyse: a worker started for nothing
+        # costs its start (imports: about 1.5 s of CPU)
+        c = client or scheduler_client or stack.enter_context(
+            local_cluster(min(workers, len(todo))))
         run(c, todo, recording_row, batch.row_options, on_row, _failure_row)
     return int(state["failed"])
 
@@ -226,7 +229,8 @@ def fleet(recordings: RecordingsLike, plant: PlantLike = None, *, client: Any = 
     status error. Runs on ``client`` (a ``dask.distributed.Client`` of yours, left
     open), on the cluster whose scheduler is at ``scheduler`` (``tcp://HOST:PORT``; one that
     does not answer within ``connect_timeout`` s is refused before any work), or on a
-    local cluster of ``workers`` processes (default: one per CPU).
+    local cluster of ``workers`` processes (default: one per CPU; no more than there are
+    recordings to analyse).
 
     With ``out`` (a new or empty directory, or one an earlier batch wrote) the table is kept
     on disk as it grows (``results.parquet``, readable at every moment), with
