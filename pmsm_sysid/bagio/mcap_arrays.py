@@ -120,8 +120,8 @@ def _gather(buf: np.ndarray, at: np.ndarray, dtype: str) -> np.ndarray:
 
 
 def _decode(raw: bytes, begins: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(stamp ns, value) of each message, as :func:`.cdr.decode_stamped` reads them; None
-    when one of them is not one it would decode."""
+    """(stamp ns, value) of each message, as :func:`.cdr.decode_stamped` reads them;
+    ``_Unreadable`` when one of them is not one it would decode."""
     buf = np.frombuffer(raw, dtype=np.uint8)
     if np.any(ends - begins < 16) or np.any(buf[begins] != _ENC[0]) \
             or np.any(buf[begins + 1] != _ENC[1]):
