@@ -22,11 +22,19 @@ from typing import Any
 
 import numpy as np
 
-from .mcap_messages import _MESSAGE, _OP_MESSAGE, _U64, _storage_map, _Unreadable, chunk_bytes
+from .cdr import ENCAPSULATION
+from .mcap_messages import (
+    _MESSAGE,
+    _OP_MESSAGE,
+    _U64,
+    _storage_map,
+    _Unreadable,
+    chunk_bytes,
+    chunks_in,
+)
 
 #: (stamps in ns, values) of one stream while reading
 Stream = tuple["array[int]", "array[float]"]
-_ENC = (0x00, 0x01)  # CDR little-endian, as :func:`.cdr.decode_stamped` requires
 
 
 #: Records walked one by one before the rest of a chunk is predicted from their sizes.
@@ -123,8 +131,9 @@ def _decode(raw: bytes, begins: np.ndarray, ends: np.ndarray) -> tuple[np.ndarra
     """(stamp ns, value) of each message, as :func:`.cdr.decode_stamped` reads them;
     ``_Unreadable`` when one of them is not one it would decode."""
     buf = np.frombuffer(raw, dtype=np.uint8)
-    if np.any(ends - begins < 16) or np.any(buf[begins] != _ENC[0]) \
-            or np.any(buf[begins + 1] != _ENC[1]):
+    # little-endian CDR, as decode_stamped requires
+    if np.any(ends - begins < 16) or np.any(buf[begins] != ENCAPSULATION[0]) \
+            or np.any(buf[begins + 1] != ENCAPSULATION[1]):
         raise _Unreadable("a message decode_stamped does not read")
     sec = _gather(buf, begins + 4, "<i4").astype(np.int64)
     nsec = _gather(buf, begins + 8, "<u4").astype(np.int64)
@@ -143,17 +152,18 @@ def _in_order(chunks: list[Any]) -> bool:
                for a, b in itertools.pairwise(chunks))
 
 
-def _stop_at(kinds: np.ndarray, before: list[int], until: int | None, margin: int) -> int:
-    """How many of the messages (of streams ``kinds``) are kept before the read stops: as
-    the message-by-message read does, at the first message that takes its stream to a
-    multiple of 256 once every stream holds ``until`` + ``margin`` (all of them if none)."""
+def _stop_at(kinds: np.ndarray, before: list[int], until: int | None,
+             margin: int) -> tuple[int, bool]:
+    """How many of the messages (of streams ``kinds``) are kept, and whether the read stops
+    there: as the message-by-message read does, at the first message that takes its stream
+    to a multiple of 256 once every stream holds ``until`` + ``margin``."""
     if until is None or not len(kinds):
-        return len(kinds)
+        return len(kinds), False
     counts = np.stack([before[s] + np.cumsum(kinds == s) for s in range(len(before))])
     enough = np.all(counts >= until + margin, axis=0)
     mine = counts[kinds, np.arange(len(kinds))]
     hit = np.flatnonzero(enough & (mine % 256 == 0))
-    return int(hit[0]) + 1 if len(hit) else len(kinds)
+    return (int(hit[0]) + 1, True) if len(hit) else (len(kinds), False)
 
 
 def read_stamped(reader: Any, conns: list[Any], stream_of: Mapping[int, int], n_streams: int,
@@ -175,10 +185,7 @@ def _read(reader: Any, conns: list[Any], stream_of: Mapping[int, int], n_streams
     start, stop, lo, hi = window
     storage, connmap = _storage_map(reader, conns)
     channels = {cid: stream_of[conn.id] for cid, conn in connmap.items()}
-    chunks = [x for x in storage.chunks
-              if (start is None or start < x.message_end_time + 1)
-              and (stop is None or x.message_start_time < stop)
-              and any(x.channel_count.get(cid, 0) for cid in channels)]
+    chunks = chunks_in(storage, channels, start, stop)
     if not _in_order(chunks):
         return None
     out: list[Stream] = [(array("q"), array("d")) for _ in range(n_streams)]
@@ -192,18 +199,11 @@ def _read(reader: Any, conns: list[Any], stream_of: Mapping[int, int], n_streams
         stamps, values = _decode(raw, begins, ends)
         keep = (lo <= stamps) & (stamps < hi)
         kinds, stamps, values = kinds[keep], stamps[keep], values[keep]
-        n = _stop_at(kinds, [len(s[0]) for s in out], until, margin)
+        n, stopped = _stop_at(kinds, [len(s[0]) for s in out], until, margin)
         for s, (st, va) in enumerate(out):
             mine = kinds[:n] == s
             st.frombytes(np.ascontiguousarray(stamps[:n][mine], dtype=np.int64).tobytes())
             va.frombytes(np.ascontiguousarray(values[:n][mine], dtype=np.float64).tobytes())
-        if n < len(kinds) or (until is not None and n and _stopped(kinds, n, out, until,
-                                                                    margin)):
+        if stopped:
             return out, True
     return out, False
-
-
-def _stopped(kinds: np.ndarray, n: int, out: list[Stream], until: int, margin: int) -> bool:
-    """Whether the last message kept is the one the read stopped at."""
-    last = len(out[int(kinds[n - 1])][0])
-    return last % 256 == 0 and all(len(s[0]) >= until + margin for s in out)

@@ -22,20 +22,20 @@ from rosbags.rosbag2.enums import CompressionMode
 from rosbags.rosbag2.storage_mcap import McapWriter
 
 from .cdr import ENCAPSULATION, N_FLOATS
+from .mcap_messages import _MESSAGE, _OP_MESSAGE
 
 #: rosbags closes a chunk once its buffer holds more than this (storage_mcap.McapWriter.write).
 CHUNK_BYTES = 2**20
-_OP_MESSAGE = 5
-_RECORD_HEAD = 1 + 8 + 2 + 4 + 8 + 8  # opcode, length, channel, sequence, log and publish time
+_RECORD_HEAD = 1 + 8 + _MESSAGE.size  # opcode, length, then channel, sequence, two times
 
 
-def _record_fields(k: int, frame: bytes, n_floats: int) -> list[tuple[str, Any]]:
-    """The fields of one message record of topic ``k`` (packed, little-endian)."""
-    pad = -(12 + len(frame)) % 8
+def _record_fields(k: int, padded: int, n_floats: int) -> list[tuple[str, Any]]:
+    """The fields of one message record of topic ``k`` (packed, little-endian); ``padded``:
+    the frame id's bytes with its NUL and padding."""
     fields: list[tuple[str, Any]] = [
         (f"op{k}", "u1"), (f"len{k}", "<u8"), (f"ch{k}", "<u2"), (f"seq{k}", "<u4"),
         (f"log{k}", "<u8"), (f"pub{k}", "<u8"), (f"enc{k}", "V4"), (f"sec{k}", "<i4"),
-        (f"nsec{k}", "<u4"), (f"slen{k}", "<u4"), (f"frame{k}", f"V{len(frame) + pad}"),
+        (f"nsec{k}", "<u4"), (f"slen{k}", "<u4"), (f"frame{k}", f"V{padded}"),
         (f"x{k}", "<f8"),
     ]
     if n_floats > 1:
@@ -50,7 +50,7 @@ def _records(ids: Sequence[int], types: Sequence[str], frame_id: str, stamps: np
     padded = frame.ljust(len(frame) + -(12 + len(frame)) % 8, b"\x00")
     fields: list[tuple[str, Any]] = []
     for k, msgtype in enumerate(types):
-        fields += _record_fields(k, frame, N_FLOATS[msgtype])
+        fields += _record_fields(k, len(padded), N_FLOATS[msgtype])
     rows = np.zeros(len(stamps), dtype=np.dtype(fields))
     sec, nsec = np.divmod(stamps, 1_000_000_000)
     sizes = []

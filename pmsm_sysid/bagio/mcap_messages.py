@@ -113,6 +113,16 @@ def _storage_map(reader: Any, connections: Collection[Any]) -> tuple[McapReader,
     return storage, connmap
 
 
+def chunks_in(storage: McapReader, channels: Collection[int], start: int | None,
+              stop: int | None) -> list[ChunkInfo]:
+    """The chunks holding messages on ``channels`` logged in [``start``, ``stop``), as
+    ``rosbags`` chooses them (None: no bound)."""
+    return [x for x in storage.chunks
+            if (start is None or start < x.message_end_time + 1)
+            and (stop is None or x.message_start_time < stop)
+            and any(x.channel_count.get(cid, 0) for cid in channels)]
+
+
 def _indexed(reader: Any, connections: Collection[Any], start: int | None,
              stop: int | None) -> Iterator[tuple[Any, int, bytes]] | None:
     """The messages read from the chunks, lazily; None when not an indexed MCAP bag."""
@@ -124,10 +134,7 @@ def _indexed(reader: Any, connections: Collection[Any], start: int | None,
         _chunk(storage, x, connmap,
                x.message_start_time if start is None else start,
                x.message_end_time + 1 if stop is None else stop)
-        for x in storage.chunks
-        if (start is None or start < x.message_end_time + 1)
-        and (stop is None or x.message_start_time < stop)
-        and any(x.channel_count.get(cid, 0) for cid in connmap)
+        for x in chunks_in(storage, connmap, start, stop)
     ]
     return ((connmap[channel], log_time, data)
             for log_time, offset, _, channel, data in heapq.merge(*chunks) if offset)
