@@ -6,6 +6,9 @@ PY := $(VENV)/bin/python
 CLI := $(VENV)/bin/pmsm-sysid
 STAMP := $(VENV)/.installed
 DEMO_DIR ?= demo_out
+# the lint commands, the same in `lint` and `test`
+RUFF := $(VENV)/bin/ruff check pmsm_sysid test bench scripts
+MYPY := $(VENV)/bin/mypy pmsm_sysid
 
 # Keep DDS discovery on this host.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
@@ -35,8 +38,8 @@ demo: $(STAMP)
 	ROS_LOG_DIR=$(abspath $(DEMO_DIR))/ros_log bash scripts/demo.sh $(DEMO_DIR)
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check pmsm_sysid test bench scripts
-	$(VENV)/bin/mypy pmsm_sysid
+	$(RUFF)
+	$(MYPY)
 
 # the whole suite (what CI runs); the browser test's Chromium is installed first. Three test
 # processes on two cores: the live ROS tests spend much of their time waiting on replays and
@@ -44,11 +47,11 @@ lint: $(STAMP)
 # mypy runs beside pytest (on a fresh clone it checks from scratch: about 18 s of one core,
 # which the test processes' waits leave free); its output follows the tests'.
 test: $(STAMP) browser
-	$(VENV)/bin/ruff check pmsm_sysid test bench scripts
-	@log=$$(mktemp); echo "$(VENV)/bin/mypy pmsm_sysid (beside the tests)"; \
-	$(VENV)/bin/mypy pmsm_sysid >$$log 2>&1 & typing=$$!; \
+	$(RUFF)
+	@log=$$(mktemp); echo "$(MYPY) (beside the tests)"; \
+	$(MYPY) >$$log 2>&1 & typing=$$!; \
 	ROS_LOG_DIR=$$(mktemp -d) $(PY) -m pytest -n 3 --dist loadgroup -q test; tests=$$?; \
-	wait $$typing; typed=$$?; echo "mypy pmsm_sysid:"; cat $$log; rm -f $$log; \
+	wait $$typing; typed=$$?; echo "$(MYPY):"; cat $$log; rm -f $$log; \
 	test $$tests -eq 0 -a $$typed -eq 0
 
 # the edit-test loop: lint + the tests that need no ROS and are not slow (about 58 s on 2 cores)
