@@ -9,7 +9,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "bench"]),
-    package_data={PACKAGE: ["data/*.yaml", "py.typed", "report/templates/*.j2"]},
+    package_data={PACKAGE: ["data/*.yaml", "data/*.xml", "py.typed", "report/templates/*.j2"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),

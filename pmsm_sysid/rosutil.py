@@ -34,6 +34,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.utilities import try_shutdown
 
 from .core.errors import BagError, PmsmSysidError
+from .dds import use_packaged_profile
 from .topics import INPUT_TYPES, POSITION, SPEED, THRUST, normalize_namespace
 
 NS_PER_S = 1_000_000_000
@@ -132,6 +133,7 @@ def ros_session(domain_id: int | None = None,
     rclpy signal handlers are installed (combine with :func:`stop_on_signals` in a verb).
     """
     domain = env_domain_id() if domain_id is None else domain_id
+    use_packaged_profile()
     ctx = Context()
     try:
         rclpy.init(context=ctx, domain_id=domain, args=["pmsm-sysid", *(ros_args or [])])

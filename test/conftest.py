@@ -29,6 +29,8 @@ from pathlib import Path
 
 import pytest
 
+from pmsm_sysid.dds import use_packaged_profile
+
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 EMPS_MAT = SHARED / "data" / "emps" / "DATA_EMPS.mat"
@@ -56,6 +58,10 @@ sys.meta_path.insert(0, _WithoutRos())
 '''
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+# the package's Fast DDS profile (pmsm_sysid.dds) in every test process and the processes
+# they start, before any test initialises rclpy (Fast DDS reads profiles once per process):
+# the tests that init a Context of their own run with the writers the product runs with
+use_packaged_profile()
 
 
 UNGROUPED = pytest.StashKey[bool]()

@@ -31,6 +31,7 @@ from typing import Any
 
 from ..core.errors import PmsmSysidError
 from ..core.online.workerproc import START_METHOD
+from ..dds import use_packaged_profile
 from ..topics import INPUT_TYPES, input_topic
 
 NODE_NAME = "pmsm_record"
@@ -62,6 +63,7 @@ def _serve(conn: Any, path: str, namespace: str, domain_id: int | None,
     from ..bagio import BagRecorder
     from .recorder import RecorderNode
 
+    use_packaged_profile()
     ctx = Context()
     rclpy.init(context=ctx, domain_id=domain_id,
                signal_handler_options=SignalHandlerOptions.NO)

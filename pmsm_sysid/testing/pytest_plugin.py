@@ -4,7 +4,9 @@ point ``pmsm_sysid``, so installing the package is enough).
 - ``ros_env``: a ``ROS_DOMAIN_ID`` of the test's own (different for each test and each
   pytest-xdist worker), localhost-only discovery and a private ``ROS_LOG_DIR``; yields the id.
 - ``ros_context``: an initialised private :class:`rclpy.context.Context` on that domain,
-  shut down after the test.
+  shut down after the test. Before it, the process is pointed at the package's Fast DDS
+  profile (a 0.1 s writer heartbeat, :mod:`pmsm_sysid.dds`) unless it chose a profile or
+  a middleware of its own.
 - ``ros_executor``: a :class:`rclpy.executors.SingleThreadedExecutor` on ``ros_context``.
 - ``sim_motor``: a factory, ``sim_motor(namespace="/x", excitation="paper-speed", seed=0,
   plant=None, **options)``, that starts a simulated motor node (publishing
@@ -38,6 +40,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
+from ..dds import use_packaged_profile
 
 NO_ROS = ("needs rclpy: pip install 'pmsm_sysid[ros]' (the ROS 2 Jazzy wheels) or source a "
           "ROS 2 Jazzy installation")
@@ -91,6 +95,7 @@ def ros_context(ros_env: int) -> Iterator[Any]:
     rclpy = _rclpy()
     from rclpy.context import Context
 
+    use_packaged_profile()
     ctx = Context()
     rclpy.init(context=ctx, domain_id=ros_env)
     try:
