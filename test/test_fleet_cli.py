@@ -440,6 +440,8 @@ def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_thresh
     assert defaults() == (True, 65536)  # left as they were
 
 
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
 def test_a_local_cluster_starts_no_more_workers_than_recordings_to_analyse(
         five_recordings: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A worker started for nothing costs its start: two recordings left (of five, three
