@@ -25,16 +25,17 @@ import tempfile
 import time
 from pathlib import Path
 
+from pmsm_sysid.dds import PROFILE_VARIABLES
+
 
 def one_run(duration: float, profile: str | None) -> float:
     """Wall seconds of one recorded run (its process from start to exit)."""
     with tempfile.TemporaryDirectory() as tmp:
-        env = {k: v for k, v in os.environ.items()
-               if k not in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")}
+        env = {k: v for k, v in os.environ.items() if k not in PROFILE_VARIABLES}
         env.update(ROS_LOG_DIR=str(Path(tmp) / "log"), ROS_DOMAIN_ID=env.get("ROS_DOMAIN_ID",
                                                                               "73"))
         if profile is not None:
-            env["FASTRTPS_DEFAULT_PROFILES_FILE"] = profile
+            env[PROFILE_VARIABLES[0]] = profile
         out = Path(tmp) / "run.json"
         t0 = time.monotonic()
         proc = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "run", "--duration",

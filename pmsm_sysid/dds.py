@@ -5,8 +5,8 @@ reader acknowledges them, and a reader acknowledges when the writer's heartbeat 
 Fast DDS (ROS 2 Jazzy's default middleware) sends that heartbeat every 3 s, so each wait
 for the last samples to be acknowledged (the end of ``run`` with a recorder, the end of
 ``replay``, a SIGTERM'd run) took up to 3 s per round for nothing: a 5 s recorded run
-took 11 s. ``data/fastdds_profile.xml`` sets a 0.1 s heartbeat for every data writer and
-nothing else; the same run takes 7.5 s.
+took 11.5 s. ``data/fastdds_profile.xml`` sets a 0.1 s heartbeat for every data writer and
+nothing else; the same run takes 7.9 s (``bench/run_end_bench.py``).
 
 :func:`use_packaged_profile` points Fast DDS at that file, before the process's first
 ROS context is initialised (Fast DDS reads its profiles once per process), unless the
