@@ -190,6 +190,10 @@ class Pipeline:
         if self.sim is not None:  # reliable delivery of the last samples to other processes
             from rclpy.duration import Duration
 
+            # the run is over (its duration, a signal, the caller's condition): the motor
+            # publishes nothing more, or every wait below would chase samples published
+            # while it waits (beside busy processes a SIGTERM'd run went on for 30 s)
+            self.sim.stop_timer()
             for pub in self.sim.publishers:
                 pub.wait_for_all_acked(Duration(seconds=min(timeout_s, 2.0)))
         if ident is not None:

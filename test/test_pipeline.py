@@ -125,3 +125,27 @@ def _summary(r: dict[str, Any]) -> Any:
     top = max(r["h1"]["peaks"], key=lambda p: p["gain_db"])["freq_hz"] if r["h1"]["peaks"] \
         else None
     return top, [(q["kind"], q["sign"], round(q["freq_hz"], 2)) for q in r["h2"]["ridges"]]
+
+
+def test_a_stopped_wall_clock_run_publishes_nothing_while_it_finishes(
+        ros_context: Any) -> None:
+    """Ctrl-C or SIGTERM sets the stop event (``run``'s signal handler); what the run
+    publishes is then what it had published: the motor publishes nothing more while the
+    pipeline finishes (fits, analyses, acknowledgements), so nothing keeps the finish
+    waiting on samples that arrive meanwhile."""
+    from pmsm_sysid.app import build_pipeline
+
+    small = {"outputs": ["speed"], "window": 300, "hop": 100, "speed.ny": 4, "speed.nu": 4,
+             "speed.terms": 6, "method": "ofr"}
+    with build_pipeline(clock="wall", seed=1, context=ros_context,
+                        identifier_params=small) as pipe:
+        pipe.run(until=lambda: pipe.sim.published >= 400)
+        pipe.stop.set()  # as the signal handler does
+        pipe.run()  # returns at once
+        pipe.stop.clear()
+        stopped_at = pipe.sim.published
+        pipe.finish()
+        s = pipe.summary()
+        after = pipe.sim.published
+    assert after == stopped_at == s["samples_published"] >= 400
+    assert s["samples_dropped"] == 0 and s["windows_fitted"] >= 1
