@@ -146,14 +146,20 @@ def test_node_executables_compose_the_pipeline_with_ros_args(
                                        "-p", "hop:=100", **pipe)
     started["gfrf"] = _installed(workspace, "gfrf", "--ros-args", "-r", f"__ns:={ns}",
                                  "-p", "orders:=[1]", **pipe)
-    spin_until(ros_executor, lambda: len(got["model"]) >= 2 and len(got["ridges"]) >= 1,
+
+    def analysed() -> list[dict[str, Any]]:
+        """Ridges of models the probe received (on a busy machine the probe may discover
+        the identifier after its first model, which the GFRF node did receive)."""
+        ids = {m["model_id"] for m in got["model"]}
+        return [r for r in got["ridges"] if r["model_id"] in ids]
+
+    spin_until(ros_executor, lambda: len(got["model"]) >= 2 and bool(analysed()),
                timeout_s=240)
     probe.destroy_node()
     assert {m["output"] for m in got["model"]} == {"speed"}  # the params file
     # -p hop:=100: window number seq ends at sample 100 seq (250 seq by default)
     assert all(m["window"]["stop_index"] == 100 * m["window"]["seq"] for m in got["model"])
-    assert got["ridges"][0]["model_id"] in {m["model_id"] for m in got["model"]}
-    assert got["ridges"][0]["h2"]["skipped"]  # -p orders:=[1]: no H2
+    assert all(r["h2"]["skipped"] for r in analysed())  # -p orders:=[1]: no H2
     for name, sig in (("gfrf", signal.SIGINT), ("identifier", signal.SIGTERM),
                       ("sim", signal.SIGINT)):
         proc = started[name]
