@@ -39,8 +39,9 @@ from rclpy.parameter import Parameter
 
 from .core.errors import PmsmSysidError
 from .core.physics.plant import Plant
-from .diagnosed import diagnosis_summary, run_history
-from .pipeline_nodes import DEFAULT_NODES, NODES, parse_nodes
+from .pipeline_nodes import DEFAULT_NODES, parse_nodes
+from .pipeline_start import start_recorder, wait_for_recorder, wait_until_matched
+from .pipeline_summary import pipeline_summary
 from .topics import DEFAULT_NAMESPACE
 
 BACKLOG = 200  # samples the sim may run ahead of the identifier under back-pressure
@@ -359,8 +360,8 @@ def build_pipeline(
                 made[name] = _make_checked(name, ctx, opts)
                 executor.add_node(made[name])
             if record is not None:  # the sim here is held until it records
-                pipe.recorder = _recorder(ctx, record, namespace, pipe.identifier)
-                _wait_for_recorder(pipe, MATCH_S)
+                pipe.recorder = start_recorder(ctx, record, namespace, pipe.identifier)
+                wait_for_recorder(pipe, MATCH_S)
             if pipe.stepped:
                 pipe.sim.stop_timer()  # stepped by the pipeline (back-pressure)
                 for node in (pipe.identifier, pipe.diagnose):
@@ -369,7 +370,7 @@ def build_pipeline(
                 if pipe.identifier is not None:  # the worker never waits for a hand-over
                     pipe.identifier.engine.hand_over_ahead(2)
             elif pipe.sim is not None and wait_s > 0 and "identifier" not in names:
-                _wait_until_matched(pipe.sim, executor, wait_s, subscribers)
+                wait_until_matched(pipe.sim, executor, wait_s, subscribers)
             pipe.started = time.monotonic()
             if pipe.identifier is not None:
                 pipe.identifier.restart_input_clock()
@@ -395,59 +396,6 @@ def _context(context: Context | None, domain_id: int | None, session: Any,
         executor.shutdown(timeout_sec=2.0)
 
 
-def _wait_until_matched(sim: Any, executor: SingleThreadedExecutor, wait_s: float,
-                        subscribers: int = 1) -> bool:
-    """Hold the sim node until each of its input publishers is matched by ``subscribers``
-    subscribers in other processes (or ``wait_s`` passes), then start it: nothing is
-    published into the void while the processes discover each other (an identifier that
-    records is two: the recorder is a process of its own)."""
-    pubs = sim.input_publishers
-    sim.stop_timer()
-    try:
-        deadline = time.monotonic() + wait_s
-        while time.monotonic() < deadline and sim.context.ok():
-            if all(p.get_subscription_count() >= subscribers for p in pubs):
-                return True
-            executor.spin_once(timeout_sec=0.1)
-        return False
-    finally:
-        sim.start_timer()
-
-
-def _recorder(ctx: Context, path: str, namespace: str, identifier: Any = None) -> Any:
-    """A recorder process (inputs and identification outputs) writing a new bag at
-    ``path`` on the context's domain; the inputs are the topics the ``identifier`` here
-    listens to (e.g. a robot's JointState topic), else the three under ``namespace``."""
-    from .nodes.recorder_process import RecorderProcess
-
-    inputs = identifier.input_topic_types if identifier is not None else None
-    return RecorderProcess(path, namespace=namespace, domain_id=ctx.get_domain_id(),
-                           inputs=inputs)
-
-
-def _wait_for_recorder(pipe: Pipeline, timeout_s: float) -> bool:
-    """Hold the sim until the recorder process has matched every publisher of this
-    process on a recorded topic (it then misses no sample), at most ``timeout_s``."""
-    rec, sim = pipe.recorder, pipe.sim
-    pubs = [p for n in pipe.nodes.values() for p in n.publishers if p.topic_name in rec.topics]
-    local = {}
-    for p in pubs:
-        local[p.topic_name] = sum(s.topic_name == p.topic_name
-                                  for n in pipe.nodes.values() for s in n.subscriptions)
-    if sim is not None and not pipe.stepped:
-        sim.stop_timer()
-    try:
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if all(p.get_subscription_count() > local[p.topic_name] for p in pubs):
-                return True
-            time.sleep(0.02)
-        return False
-    finally:
-        if sim is not None and not pipe.stepped:
-            sim.start_timer()
-
-
 def _shutdown(pipe: Pipeline) -> None:
     """Finalise the recording first (it must survive anything after), then the nodes."""
     try:
@@ -458,79 +406,3 @@ def _shutdown(pipe: Pipeline) -> None:
             pipe.executor.remove_node(node)
             node.destroy_node()
 
-
-# --- the run summary ----------------------------------------------------------------------
-
-def _pick(by_output: Mapping[str, Any], order: Sequence[str]) -> Any:
-    for name in order:
-        if name in by_output:
-            return by_output[name]
-    return next(iter(by_output.values()), None)
-
-
-def pipeline_summary(pipe: Pipeline) -> dict[str, Any]:
-    """Keys (samples_received, samples_dropped, windows_fitted, windows_skipped,
-    last_model, last_ridges, last_validation) plus change_events and per-node details.
-    Counters of a node this process does not run are null."""
-    ident, gfrf, sim = pipe.identifier, pipe.gfrf, pipe.sim
-    col = pipe.nodes.get("collector")
-    out: dict[str, Any] = {
-        "nodes": [n for n in NODES if n in pipe.nodes], "clock": pipe.clock,
-        "wall_time_s": time.monotonic() - pipe.started,
-        "samples_published": sim.published if sim is not None else None,
-    }
-    keys = ("samples_received", "samples_dropped", "samples_missing", "unaligned",
-            "out_of_order", "duplicates", "clock_restarts", "rate_changes", "windows_due",
-            "windows_fitted", "windows_skipped",
-            "windows_failed", "fit_latency_p50_ms", "fit_latency_p99_ms", "fit_cpu_s")
-    stats = ident.engine.stats.to_dict() if ident is not None else {}
-    out.update({k: stats.get(k) for k in keys})
-    order = list(ident.params["outputs"]) if ident is not None else ["speed", "position"]
-    models = dict(ident.last["models"]) if ident is not None else dict(col.models if col else {})
-    ridges = dict(col.ridges) if col is not None else {}
-    if not ridges and gfrf is not None and gfrf.last_ridges:
-        ridges = {str(gfrf.last_ridges.get("output")): gfrf.last_ridges}
-    vals = dict(ident.last["validation"]) if ident is not None else {}
-    out.update({
-        "last_model": _pick(models, order), "last_ridges": _pick(ridges, order),
-        "last_validation": _pick(vals, order), "last_models": models,
-        "last_ridges_by_output": ridges, "last_validations": vals,
-        "validation_counts": ({k: list(v) for k, v in ident.validation_counts.items()}
-                              if ident is not None else {}),
-        "models_published": ident.models_published if ident is not None else None,
-        "change_events": (list(ident.last["changes"]) if ident is not None
-                          else list(col.changes) if col is not None else []),
-        "errors": list(ident.errors) if ident is not None else [],
-        "history": run_history(col),
-        "inputs": ident.input_report().to_dict() if ident is not None else None,
-        "speed_derived": ident.engine.aligner.speed_derived if ident is not None else None,
-    })
-    if gfrf is not None:
-        g = gfrf.summary()
-        out["gfrf"] = {k: v for k, v in g.items() if not k.startswith("last_")}
-    out.update(diagnosis_summary(pipe.diagnose, col))
-    if pipe.recorder is not None:
-        out.update(record_summary(pipe))
-    return out
-
-
-def record_summary(pipe: Pipeline) -> dict[str, Any]:
-    """What the recorder wrote and what it lost: per input topic, the samples published
-    here that are not in the bag, or (sim elsewhere) the samples its stamps skip."""
-    res = pipe.record_result or {}
-    topics: dict[str, int] = res.get("topics", {})
-    missing: dict[str, int] = res.get("samples_missing", {})
-    inputs = pipe.recorder.inputs
-    if pipe.sim is not None:
-        lost = max((pipe.sim.published - topics.get(t, 0) for t in inputs), default=0)
-    elif pipe.identifier is not None:  # received here but not recorded, or skipped stamps
-        got = pipe.identifier.engine.stats.samples_received
-        never = set(pipe.identifier.input_report().missing)  # e.g. no speed: derived
-        inputs = [t for t in inputs if t not in never]
-        lost = max((max(got - topics.get(t, 0), missing.get(t, 0)) for t in inputs), default=0)
-    else:
-        lost = max((missing.get(t, 0) for t in inputs), default=0)
-    return {"record": str(pipe.recorder.path), "record_error": pipe.record_error,
-            "recorded_messages": res.get("messages") if res else None,
-            "recorded_by_topic": topics, "record_samples_lost": lost if res else None,
-            "record_stamp_gaps": sum(res.get("stamp_gaps", {}).values()) if res else None}
