@@ -276,7 +276,7 @@ def test_a_window_status_carries_the_runs_windows() -> None:
     windows passed so far and whether that is as often as a correct model passes (the run
     summary's binomial test against 1 in 20), so that a reader of one failed window knows
     whether it is chance."""
-    from pmsm_sysid.nodes.identifier_node import IdentifierNode
+    from pmsm_sysid.nodes.identifier_status import validation_status
 
     tests = {k: {"max_abs": 0.05, "band": 0.062, "pass": k != "ee", "n_outside": 1,
                  "n_lags": 20, "n_allowed": 4} for k in ("ee", "ue", "u2e", "u2e2", "e_eu")}
@@ -284,7 +284,7 @@ def test_a_window_status_carries_the_runs_windows() -> None:
          "osa_r2": 0.999, "validated_on": {"seq": 13},
          "free_run": {"nrmse": 0.06, "r2": 0.996, "diverged": False},
          "correlation_tests": tests, "correlation_tests_validation": tests}
-    ok = IdentifierNode._validation_status(v, count=[50, 52])
+    ok = validation_status(v, count=[50, 52])
     values = {kv.key: kv.value for kv in ok.values}
     assert (values["windows_passed"], values["windows_validated"]) == ("50", "52")
     assert values["run_consistent"] == "true"
@@ -292,6 +292,6 @@ def test_a_window_status_carries_the_runs_windows() -> None:
     assert ok.message.endswith("; run: 50/52 windows passed, as a correct model does (1 in 20 "
                                "fail by chance)")
     assert json.loads(values["corr.ee"])["n_allowed"] == 4
-    bad = IdentifierNode._validation_status(v, count=[40, 52])
+    bad = validation_status(v, count=[40, 52])
     assert "more failures than chance (binomial p = 7.7e-06)" in bad.message
     assert {kv.key: kv.value for kv in bad.values}["run_consistent"] == "false"

@@ -30,7 +30,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.context import Context
 from rclpy.guard_condition import GuardCondition
@@ -60,6 +60,7 @@ from ..topics import (
 )
 from .defaults import IDENTIFIER_DEFAULTS
 from .health import HealthPublisher, IdentifierHealth
+from .identifier_status import change_status, status, validation_status
 from .numbers import NumberPublisher
 from .params import (
     IDENTIFIER_SPECS,
@@ -90,15 +91,6 @@ def fit_processor(config: TrackerConfig, where: str) -> Callable[[Window], Windo
 def _shape(w: Window) -> tuple[int, int]:
     """(samples, history) of a window: which settings it was cut with."""
     return (w.stop_index - w.start_index, w.history)
-
-
-def status(name: str, level: bytes, message: str, hardware_id: str,
-           values: dict[str, Any]) -> DiagnosticStatus:
-    """A DiagnosticStatus with ``values`` as strings (floats with full precision)."""
-    return DiagnosticStatus(
-        name=name, level=level, message=message, hardware_id=hardware_id,
-        values=[KeyValue(key=k, value=v if isinstance(v, str) else json.dumps(json_safe(v)))
-                for k, v in values.items()])
 
 
 class IdentifierNode(Node):
@@ -404,13 +396,13 @@ class IdentifierNode(Node):
                 count[0] += bool(v["pass"])
                 count[1] += 1
             score = {d["output"]: d for d in r.decisions}  # the change detector, per output
-            arr = DiagnosticArray(status=[self._validation_status(
+            arr = DiagnosticArray(status=[validation_status(
                 v, score.get(v["output"]), float(self.params["change.s_confirm"]),
                 self.validation_counts.get(v["output"])) for v in r.validations])
             arr.header.stamp = stamp
             self._val_pub.publish(arr)
         if r.changes:
-            arr = DiagnosticArray(status=[self._change_status(c) for c in r.changes])
+            arr = DiagnosticArray(status=[change_status(c) for c in r.changes])
             arr.header.stamp = stamp
             self._change_pub.publish(arr)
             self.last["changes"].extend(r.changes)
@@ -419,49 +411,6 @@ class IdentifierNode(Node):
                 self.get_logger().warning(  # type: ignore[no-untyped-call]
                     f"plant change on {c['output']} at {c['window']['end_stamp']:.3f} s: "
                     f"{c['reasons']}")
-
-    @staticmethod
-    def _validation_status(v: dict[str, Any], decision: dict[str, Any] | None = None,
-                           threshold: float | None = None,
-                           count: list[int] | None = None) -> DiagnosticStatus:
-        """One window's cross-validation, with the run's windows so far (``count``: passed,
-        made) judged as the run summary judges them (binomial test against 1 in 20)."""
-        from ..core.validation.windows import window_rate
-
-        fr = v["free_run"]
-        n_est = sum(t["pass"] for t in v["correlation_tests"].values())
-        n_new = sum(t["pass"] for t in v["correlation_tests_validation"].values())
-        msg = (f"window {'pass' if v['pass'] else 'fail'}: free-run NRMSE {fr['nrmse']:.3g}, "
-               f"R2 {fr['r2']:.4g} on the next window; correlation tests {n_est}/5 "
-               f"(estimation), {n_new}/5 (next window)")
-        values = {"model_id": v["model_id"], "nrmse": fr["nrmse"], "r2": fr["r2"],
-                  "diverged": fr["diverged"], "osa_r2": v["osa_r2"], "min_r2": v["min_r2"],
-                  "validated_on": v["validated_on"], "pass": v["pass"]}
-        if count:
-            rate = window_rate(*count)
-            values.update(windows_passed=count[0], windows_validated=count[1],
-                          run_p_value=rate["p_value"], run_consistent=rate["consistent"])
-            msg += (f"; run: {count[0]}/{count[1]} windows passed, "
-                    + ("as a correct model does (1 in 20 fail by chance)" if rate["consistent"]
-                       else f"more failures than chance (binomial p = {rate['p_value']:.2g})"))
-        for prefix, key in (("corr", "correlation_tests"),
-                            ("corr_next", "correlation_tests_validation")):
-            for name, t in v[key].items():
-                values[f"{prefix}.{name}"] = {k: t[k] for k in ("max_abs", "band", "pass",
-                                                                "n_outside", "n_lags",
-                                                                "n_allowed") if k in t}
-        if decision is not None:  # the change statistic of this window and its threshold
-            values.update(change_score=decision["score"], change_state=decision["state"],
-                          change_threshold=threshold)
-        return status(f"identifier/cross_validation/{v['output']}", OK if v["pass"] else WARN,
-                      msg, v["model_id"], values)
-
-    @staticmethod
-    def _change_status(c: dict[str, Any]) -> DiagnosticStatus:
-        msg = f"plant change on {c['output']}: {', '.join(c['reasons'])}"
-        return status(f"identifier/change/{c['output']}", WARN, msg, c["model_id"],
-                      {"window": c["window"], "z": c["z"], "values": c["values"],
-                       "reasons": c["reasons"]})
 
     # ------------------------------------------------------------------ summary
     def summary(self) -> dict[str, Any]:
