@@ -16,7 +16,7 @@ if TYPE_CHECKING:
 
 
 def wait_until_matched(sim: Any, executor: SingleThreadedExecutor, wait_s: float,
-                        subscribers: int = 1) -> bool:
+                       subscribers: int = 1) -> bool:
     """Hold the sim node until each of its input publishers is matched by ``subscribers``
     subscribers in other processes (or ``wait_s`` passes), then start it: nothing is
     published into the void while the processes discover each other (an identifier that
