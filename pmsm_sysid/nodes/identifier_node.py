@@ -30,7 +30,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.context import Context
 from rclpy.guard_condition import GuardCondition
@@ -60,7 +60,7 @@ from ..topics import (
 )
 from .defaults import IDENTIFIER_DEFAULTS
 from .health import HealthPublisher, IdentifierHealth
-from .identifier_status import change_status, status, validation_status
+from .identifier_status import OK, WARN, change_status, status, validation_status
 from .numbers import NumberPublisher
 from .params import (
     IDENTIFIER_SPECS,
@@ -71,7 +71,6 @@ from .params import (
     declare_all,
 )
 
-OK, WARN = DiagnosticStatus.OK, DiagnosticStatus.WARN
 DRAIN_ROUNDS = 100  # at most 300 input messages taken per subscription callback
 
 #: Parameters and their defaults (:mod:`.defaults`, importable without ROS).
