@@ -78,10 +78,12 @@ def test_a_ros_session_loads_it_without_a_word(tmp_path: Path) -> None:
     the verbs points Fast DDS at the profile, and Fast DDS reports no error reading it
     (it prints XML parse errors on stderr and goes on with its defaults)."""
     code = ("import os\n"
+            "import rclpy\n"
+            "from std_msgs.msg import String\n"
             "from pmsm_sysid.rosutil import ros_session\n"
             "with ros_session() as s:\n"
-            "    node = s.context and __import__('rclpy').create_node('probe', context=s.context)\n"
-            "    node.create_publisher(__import__('std_msgs.msg').msg.String, 'x', 10)\n"
+            "    node = rclpy.create_node('probe', context=s.context)\n"
+            "    node.create_publisher(String, 'x', 10)\n"
             "    node.destroy_node()\n"
             "print(os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'])\n")
     env = {k: v for k, v in os.environ.items() if k not in dds.PROFILE_VARIABLES}
