@@ -17,6 +17,7 @@ that needs ROS and is not marked ``ros`` fails there.
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import resource
@@ -130,6 +131,16 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             items[:] = [item for item in items if not item.get_closest_marker("ros")]
     slow_modules = {item.path for item in items if item.get_closest_marker("slow")}
     items.sort(key=lambda item: item.path not in slow_modules)  # stable: order otherwise kept
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtestloop(session: pytest.Session) -> None:
+    """Before the first test of a test process: what collection made (the modules, every
+    test item: most of the process's objects) out of the cyclic garbage collector's sight
+    (``gc.freeze``), so that its full collections walk only what the tests made. Measured
+    on the suite: the three test processes' time in the collector 10.3 -> 5.5 s of CPU."""
+    gc.collect()
+    gc.freeze()
 
 
 def _cpu_now() -> float:
