@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from cli_inprocess import invoke
 from test_report import REPO, check_page
 
 from pmsm_sysid.core.online.history import RunHistory
@@ -82,9 +83,7 @@ def test_run_report_draws_the_history(tmp_path: Path) -> None:
     page = (out / "index.html").read_text(encoding="utf-8")
     assert "models over time" in page and "fit latency" in page
     again = tmp_path / "again"
-    r = subprocess.run([sys.executable, "-m", "pmsm_sysid.cli", "report", str(summary),
-                        "--out", str(again)], capture_output=True, text=True, timeout=300,
-                       cwd=REPO)
+    r = invoke("report", str(summary), "--out", str(again), cwd=REPO)  # an offline verb
     assert r.returncode == 0, r.stderr[-2000:]
     check_page(again / "index.html", RUN_FIGURES | GFRF_FIGURES)
 
