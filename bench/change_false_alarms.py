@@ -3,7 +3,7 @@
 For every packaged excitation, ``--duration`` seconds (default one hour) of the simulated
 motor (``--plant``, default the ``run`` default ``drive``; seed ``--seed``) go sample by
 sample through the identifier's own data path, without ROS: the window ring
-(:class:`~pmsm_sysid.core.online.streaming.WindowScheduler`) cuts a window every hop and the
+(:class:`~pmsm_sysid.core.online.windows.WindowScheduler`) cuts a window every hop and the
 :class:`~pmsm_sysid.core.online.tracker.WindowTracker` with the identifier node's default
 parameters fits, cross-validates and judges it, as ``pmsm-sysid run`` does with no window
 skipped (the simulated clock). Deterministic: same plant, seed and duration, same table.

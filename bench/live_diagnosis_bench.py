@@ -36,7 +36,7 @@ from typing import Any
 
 from pmsm_sysid import diagnosed
 from pmsm_sysid.core.online.livesim import simulated_windows
-from pmsm_sysid.core.online.streaming import Window
+from pmsm_sysid.core.online.windows import Window
 from pmsm_sysid.core.physics.plant import Cogging, CoulombFriction, load_plant
 from pmsm_sysid.nodes.diagnosis_node import DEFAULTS
 from pmsm_sysid.nodes.diagnosis_work import DiagnoseJob, LiveDiagnoser

@@ -300,8 +300,8 @@ def _simulate(plant: Any, n: int, seed: int, change_at: int | None = None,
 
 def _changes(data: np.ndarray) -> list[int]:
     """Stops of the windows where the speed tracker reports a change (paper defaults)."""
-    from pmsm_sysid.core.online.streaming import Window
     from pmsm_sysid.core.online.tracker import WindowTracker, tracker_config
+    from pmsm_sysid.core.online.windows import Window
     from pmsm_sysid.nodes.defaults import IDENTIFIER_DEFAULTS as DEFAULTS
 
     tracker = WindowTracker(tracker_config({**DEFAULTS, "outputs": ["speed"]}))

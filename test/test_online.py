@@ -13,13 +13,8 @@ from hypothesis import strategies as st
 
 from pmsm_sysid.core.errors import DataError
 from pmsm_sysid.core.online.fitqueue import FitWorker, LatestQueue, Ticket
-from pmsm_sysid.core.online.streaming import (
-    SIGNALS,
-    Sample,
-    StampAligner,
-    Window,
-    WindowScheduler,
-)
+from pmsm_sysid.core.online.streaming import SIGNALS, Sample, StampAligner
+from pmsm_sysid.core.online.windows import Window, WindowScheduler
 
 PERIOD = 2_000_000  # 500 Hz in ns
 

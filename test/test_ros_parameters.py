@@ -108,7 +108,8 @@ def test_a_resized_window_ring_keeps_the_newest_contiguous_samples() -> None:
     new hop grid, with the newest values."""
     import numpy as np
 
-    from pmsm_sysid.core.online.streaming import Sample, WindowScheduler
+    from pmsm_sysid.core.online.streaming import Sample
+    from pmsm_sysid.core.online.windows import WindowScheduler
 
     ring = WindowScheduler(window=6, hop=3, history=1, n_signals=1, signals=("x",))
     cut = [ring.push(Sample(k, 1000 * k, (float(k),))) for k in range(10)]

@@ -47,7 +47,7 @@ from ..core.errors import DataError
 from ..core.frequency.analysis import json_safe
 from ..core.online.engine import EngineConfig, OnlineEngine, WindowError
 from ..core.online.spans import LatestSpan, SpanSizer
-from ..core.online.streaming import Window
+from ..core.online.windows import Window
 from ..core.online.workerproc import ProcessWorker
 from ..topics import DEFAULT_NAMESPACE, DIAGNOSIS, normalize_namespace
 from .diagnosis_work import DiagnoseJob, LiveDiagnoser

@@ -2,7 +2,7 @@
 
 This module runs in the diagnosis node's worker process (:class:`LiveDiagnoser`, built there
 once) and imports no ROS, so that process starts light. A :class:`DiagnoseJob` carries the
-real span (a :class:`~pmsm_sysid.core.online.streaming.Window` of the node's aligned inputs),
+real span (a :class:`~pmsm_sysid.core.online.windows.Window` of the node's aligned inputs),
 its sample rate, the options of this diagnosis and, with a simulator beside the drive, the
 simulator's latest span. The result is the diagnose JSON (``ps.Diagnosis.to_dict()``, what
 ``pmsm-sysid diagnose --json`` writes for the same samples) plus:
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..core.errors import OptionError
-from ..core.online.streaming import Window
+from ..core.online.windows import Window
 
 HELD_OUT = "the last 30 % of the span (diagnose's own split)"
 

@@ -45,8 +45,8 @@ from ..core.errors import DataError
 from ..core.frequency.analysis import json_safe
 from ..core.online.engine import EngineConfig, OnlineEngine, WindowError
 from ..core.online.inputs import InputReport, describe_inputs
-from ..core.online.streaming import Window
 from ..core.online.tracker import TrackerConfig, WindowResult, WindowTracker, tracker_config
+from ..core.online.windows import Window
 from ..core.online.workerproc import ProcessWorker
 from ..rosutil import SLACK_DEPTH, data_qos, message_class, sample_value, stamp_from_ns, stamp_to_ns
 from ..topics import (

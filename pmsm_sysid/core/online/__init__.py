@@ -11,8 +11,9 @@ from .inputs import InputAligner, InputReport
 from .livesim import simulated_windows
 from .monitoring import SysIdView, TopicStats
 from .spans import LatestSpan, SpanSizer
-from .streaming import Sample, StampAligner, Window, WindowScheduler
+from .streaming import Sample, StampAligner
 from .tracker import TrackerConfig, WindowResult, WindowTracker
+from .windows import Window, WindowScheduler
 from .workerproc import ProcessWorker, WorkerDied
 
 __all__ = [

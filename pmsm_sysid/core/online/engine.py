@@ -36,7 +36,8 @@ import numpy as np
 from ..errors import DataError
 from .fitqueue import FitWorker, LatestQueue
 from .inputs import SPEED_SOURCES, InputAligner
-from .streaming import SIGNALS, Sample, Window, WindowScheduler
+from .streaming import SIGNALS, Sample
+from .windows import Window, WindowScheduler
 
 R = TypeVar("R")
 

@@ -13,7 +13,8 @@ from collections.abc import Iterator, Mapping
 from ..physics.excitation import ExcitationSource
 from ..physics.motor import MotorSimulator
 from ..physics.plant import Plant
-from .streaming import NS_PER_S, Sample, Window, WindowScheduler
+from .streaming import NS_PER_S, Sample
+from .windows import Window, WindowScheduler
 
 BLOCK = 5000  # excitation samples computed at once
 

@@ -1,7 +1,7 @@
 """Spans in seconds on a stream whose sample rate is read from the stamps (no ROS).
 
 The live diagnosis works in seconds (a ``span_s`` diagnosed every ``period_s``) on the same
-window ring the identifier uses (:class:`~.streaming.WindowScheduler`, cut on the absolute
+window ring the identifier uses (:class:`~.windows.WindowScheduler`, cut on the absolute
 sample grid), which counts in samples. :func:`samples_of` converts once the aligner knows
 the sample period; until then a provisional rate sizes the ring (the aligner emits no sample
 before it knows the period, so nothing is cut at the provisional size).
@@ -18,7 +18,8 @@ from dataclasses import replace
 
 from ..errors import DataError
 from .inputs import InputAligner
-from .streaming import NS_PER_S, SIGNALS, Sample, Window, WindowScheduler
+from .streaming import NS_PER_S, SIGNALS, Sample
+from .windows import Window, WindowScheduler
 
 
 def samples_of(seconds: float, period_ns: int) -> int:

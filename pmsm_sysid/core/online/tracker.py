@@ -92,7 +92,8 @@ from .features import (
     plant_harmonics_db,
     wrap_phase,
 )
-from .streaming import NS_PER_S, Window
+from .streaming import NS_PER_S
+from .windows import Window
 
 FloatArray = NDArray[np.float64]
 OUTPUTS = ("speed", "position")
