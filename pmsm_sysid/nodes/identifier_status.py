@@ -57,6 +57,7 @@ def validation_status(v: dict[str, Any], decision: dict[str, Any] | None = None,
     return status(f"identifier/cross_validation/{v['output']}", OK if v["pass"] else WARN,
                   msg, v["model_id"], values)
 
+
 def change_status(c: dict[str, Any]) -> DiagnosticStatus:
     msg = f"plant change on {c['output']}: {', '.join(c['reasons'])}"
     return status(f"identifier/change/{c['output']}", WARN, msg, c["model_id"],
