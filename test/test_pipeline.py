@@ -133,12 +133,12 @@ def test_a_stopped_wall_clock_run_publishes_nothing_while_it_finishes(
     publishes is then what it had published: the motor publishes nothing more while the
     pipeline finishes (fits, analyses, acknowledgements), so nothing keeps the finish
     waiting on samples that arrive meanwhile."""
+    from test_ros_namespaces import SMALL
+
     from pmsm_sysid.app import build_pipeline
 
-    small = {"outputs": ["speed"], "window": 300, "hop": 100, "speed.ny": 4, "speed.nu": 4,
-             "speed.terms": 6, "method": "ofr"}
     with build_pipeline(clock="wall", seed=1, context=ros_context,
-                        identifier_params=small) as pipe:
+                        identifier_params=SMALL) as pipe:
         pipe.run(until=lambda: pipe.sim.published >= 400)
         pipe.stop.set()  # as the signal handler does
         pipe.run()  # returns at once
