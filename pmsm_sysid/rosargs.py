@@ -17,7 +17,7 @@ from __future__ import annotations
 import itertools
 import tempfile
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -100,19 +100,26 @@ def _rewrite(data: dict[str, Any], namespace: str) -> dict[str, Any] | None:
 @contextmanager
 def prepared(ros_args: Sequence[str], namespace: str) -> Iterator[list[str]]:
     """``ros_args`` checked, with params files that key sections by a bare node name
-    replaced by a temporary copy keyed ``<namespace>/<node>`` (see the module docstring)."""
+    replaced by a temporary copy keyed ``<namespace>/<node>`` (see the module docstring).
+    The copies' directory is made only when a file needs one: a process killed meanwhile
+    cannot remove it, and a run without such a file leaves nothing behind."""
     import yaml
 
     check_ros_args(ros_args)
     out = list(ros_args)
     ns = ros_namespace(ros_args, namespace)
-    with tempfile.TemporaryDirectory(prefix="pmsm_sysid_params_") as tmp:
+    with ExitStack() as stack:
+        tmp: Path | None = None
         for i, a in enumerate(out[:-1]):
             if a not in PARAMS_FILE_FLAGS:
                 continue
             moved = _rewrite(_load(out[i + 1]), ns)
-            if moved is not None:
-                copy = Path(tmp) / f"{i}_{Path(out[i + 1]).name}"
-                copy.write_text(yaml.safe_dump(moved, sort_keys=False))
-                out[i + 1] = str(copy)
+            if moved is None:
+                continue
+            if tmp is None:
+                tmp = Path(stack.enter_context(
+                    tempfile.TemporaryDirectory(prefix="pmsm_sysid_params_")))
+            copy = tmp / f"{i}_{Path(out[i + 1]).name}"
+            copy.write_text(yaml.safe_dump(moved, sort_keys=False))
+            out[i + 1] = str(copy)
         yield out

@@ -42,6 +42,28 @@ def test_bare_node_sections_name_the_node_in_the_pipelines_namespace(tmp_path: P
         assert args[2] == str(g)  # nothing to move: the file is given to ROS as it is
 
 
+def test_a_temporary_copy_exists_only_while_a_file_needs_one(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without a file to rewrite nothing is made (a verb killed by SIGKILL cannot clean up
+    after itself); a rewritten file's copy is gone when the verb ends."""
+    import tempfile
+
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    as_is = tmp_path / "q.yaml"
+    as_is.write_text("/**/pmsm_identifier:\n  ros__parameters:\n    hop: 125\n")
+    with prepared(["--ros-args", "-p", "hop:=5", "--params-file", str(as_is)], "/a"):
+        assert list(scratch.iterdir()) == []
+    bare = tmp_path / "p.yaml"
+    bare.write_text("pmsm_identifier:\n  ros__parameters:\n    hop: 125\n")
+    with prepared(["--ros-args", "--params-file", str(bare), "--params-file", str(bare)],
+                  "/a") as args:
+        made = list(scratch.iterdir())
+        assert len(made) == 1 and {Path(args[2]).parent, Path(args[4]).parent} == set(made)
+    assert list(scratch.iterdir()) == []
+
+
 @pytest.mark.parametrize("args,match", [
     (["--ros-args", "--params-file", "/no/such.yaml"], "no such file"),
     (["--ros-args", "-p", "hop"], "name:=value"),
