@@ -29,6 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from ..recording.spectra import find_peaks
 from .gfrf import Gfrf
 
 FloatArray = NDArray[np.float64]
@@ -94,14 +95,11 @@ def _db(h: NDArray[np.complex128]) -> FloatArray:
 
 def _mirror_peaks(y: FloatArray, min_prom: float) -> list[tuple[int, float]]:
     """Peaks of a profile on [0, 0.5] that is even about both ends (the GFRF symmetries)."""
-    from scipy.signal import find_peaks  # here: importing scipy.signal costs about a second,
-    # and the live nodes' own process imports this module but never calls this
-
     n = len(y)
     ext = np.concatenate((y[:0:-1], y, y[-2::-1]))
-    idx, props = find_peaks(ext, prominence=min_prom)
+    idx, proms = find_peaks(ext, prominence=min_prom)
     out: list[tuple[int, float]] = []
-    for i, prom in zip(idx, props["prominences"], strict=True):
+    for i, prom in zip(idx, proms, strict=True):
         j = int(i) - (n - 1)
         if 0 <= j < n:
             out.append((j, float(prom)))

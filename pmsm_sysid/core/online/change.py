@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataError
+from ..recording.spectra import welch
 
 MAD_TO_SIGMA = 1.4826
 MIN_REFERENCE = 3  # values a baseline needs before it scores anything
@@ -240,8 +241,6 @@ SAME_EXCITATION = 0.95
 
 def input_spectrum(u: NDArray[np.float64], nperseg: int = 128) -> NDArray[np.float64]:
     """Welch power spectrum of ``u`` without its mean, normalised to sum 1 (flat if zero)."""
-    from scipy.signal import welch
-
     x = np.asarray(u, dtype=np.float64)
     _, p = welch(x - x.mean(), nperseg=min(nperseg, len(x)))
     total = float(np.sum(p))

@@ -36,11 +36,12 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 START_METHOD = "forkserver"
-#: modules the fork server imports once, so each new worker starts with them loaded (scipy's
-#: signal and stats too: the core imports them where it calls them, and a first fit that
-#: imported them would take a second longer, long enough to skip the next window)
-PRELOAD = ("numpy", "scipy.linalg", "scipy.signal", "scipy.stats",
-           "pmsm_sysid.core.online.tracker", "pmsm_sysid.core.frequency.analysis")
+#: modules the fork server imports once, so each new worker starts with them loaded: the
+#: identifier's fits and the GFRF analysis need nothing else (neither scipy.signal nor
+#: scipy.stats, about half a second more: see core.recording.spectra), so their first item
+#: is not slowed by an import, which would be long enough to skip the next window
+PRELOAD = ("numpy", "scipy.linalg", "pmsm_sysid.core.online.tracker",
+           "pmsm_sysid.core.frequency.analysis")
 
 _state: dict[str, Any] = {}
 

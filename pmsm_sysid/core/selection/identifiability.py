@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataError, InsufficientExcitationError
+from ..recording.spectra import find_peaks, welch
 
 FloatArray = NDArray[np.float64]
 
@@ -115,15 +116,9 @@ class Judgement:
 
 
 def _welch(x: FloatArray, fs: float) -> tuple[FloatArray, FloatArray]:
-    from scipy.signal import welch  # here: importing scipy.signal costs about a second, and
-    # the live nodes' own process imports this module but never calls it
-
-    nperseg = min(len(x), NPERSEG_MAX)
-    f, p = welch(x, fs=fs, window="hann", nperseg=nperseg, noverlap=nperseg // 2,
-                 detrend=False, scaling="density")
-    p = np.asarray(p, dtype=np.float64)
+    f, p = welch(x, fs, nperseg=min(len(x), NPERSEG_MAX), detrend=False)
     p[p < FLOOR_REL * float(p.max())] = 0.0
-    return np.asarray(f, dtype=np.float64), p
+    return f, p
 
 
 def _band(f: FloatArray, p: FloatArray, res: float) -> tuple[float, float]:
@@ -141,8 +136,6 @@ _LOCAL = np.r_[-24:-8, 9:25]  # the neighbourhood of a line, the line's own +-8 
 
 def _lines(p: FloatArray) -> list[int]:
     """Indices of narrow spectral lines (see the module docstring)."""
-    from scipy.signal import find_peaks  # see _welch
-
     peaks, _ = find_peaks(np.concatenate(([0.0], p, [0.0])))
     peaks = peaks - 1
     peaks = peaks[p[peaks] > float(p.max()) * 10 ** (-LINE_DB_BELOW_MAX / 10)]

@@ -54,6 +54,7 @@ from numpy.typing import NDArray
 from scipy import special
 
 from ..errors import DataError
+from ..recording.spectra import welch
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -295,8 +296,4 @@ def welch_psd(
     seg = min(len(x), 256) if nperseg is None else int(nperseg)
     if not 8 <= seg <= len(x):
         raise DataError(f"Welch PSD: nperseg must be in 8..{len(x)} (got {seg})")
-    from scipy.signal import welch  # here: importing scipy.signal costs about a second,
-    # and the live nodes' own process imports this module but never calls this
-
-    f, p = welch(x, fs=fs, nperseg=seg, detrend="constant")
-    return np.asarray(f, dtype=np.float64), np.asarray(p, dtype=np.float64)
+    return welch(x, fs, nperseg=seg)

@@ -1,0 +1,29 @@
+"""What a live worker process imports: the identifier's window fits and the GFRF node's
+analysis of their models, run in one object that reports which heavy SciPy modules its
+process holds afterwards. Kept apart from the test modules, which import SciPy themselves
+(a worker unpickles its factory by importing the factory's module)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from typing import Any
+
+from pmsm_sysid.core.frequency.message import analyse_message
+from pmsm_sysid.core.online.tracker import WindowTracker, tracker_config
+
+WATCHED = ("scipy.signal", "scipy.stats")
+
+
+class FitAndAnalyse:
+    """``probe(window)``: the tracker's result for the window and the GFRF analysis of each
+    model it produced (as the GFRF node receives them, JSON text)."""
+
+    def __init__(self, params: dict[str, Any]) -> None:
+        self.tracker = WindowTracker(tracker_config(params))
+
+    def __call__(self, window: Any) -> dict[str, Any]:
+        result = self.tracker.process(window)
+        analyses = [analyse_message(json.dumps(m), (1, 2, 3)) for m in result.models]
+        return {"models": len(result.models), "validations": len(result.validations),
+                "analyses": len(analyses), "loaded": [m for m in WATCHED if m in sys.modules]}
