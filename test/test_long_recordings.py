@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -184,7 +185,17 @@ def _bag_with_log_times(path: Path, rec: ps.Recording, log_ns: np.ndarray) -> No
 
 
 @pytest.mark.slow
-def test_a_bag_is_read_span_by_span(tmp_path: Path) -> None:
+def test_a_bag_is_read_span_by_span(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from pmsm_sysid.bagio import spans
+
+    looked_up: list[Path] = []  # the bags whose first and last stamps were read
+    ends = spans._ends
+
+    def counted(path: Path, *args: Any) -> tuple[int, int, int]:
+        looked_up.append(path)
+        return ends(path, *args)
+
+    monkeypatch.setattr(spans, "_ends", counted)
     rec = _recording(30_000)
     stamp_ns = np.round(rec.t * 1e9).astype(np.int64)
     bags = {"stamped": tmp_path / "stamped", "late": tmp_path / "late",
@@ -201,8 +212,10 @@ def test_a_bag_is_read_span_by_span(tmp_path: Path) -> None:
             for signal in ("t", "thrust", "speed", "position"):
                 np.testing.assert_array_equal(getattr(part, signal),
                                               getattr(whole, signal)[a:b], err_msg=name)
+    assert looked_up == list(bags.values())  # to plan the spans
     small = read_excerpt(bags["stamped"], max_samples=40_000)
     assert small.whole and small.used == len(rec)
+    assert len(looked_up) == len(bags)  # read whole: its ends are not needed
 
 
 def _closed_loop_control(seconds: float, seed: int) -> ps.Recording:

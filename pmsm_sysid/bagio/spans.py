@@ -39,21 +39,25 @@ def _stamp(conn: Any, data: bytes) -> int:
     return _stamp_ns(typestore().deserialize_cdr(data, conn.msgtype))
 
 
-def _extent(path: Path, reader: Any, namespace: str | None) -> tuple[int, int, int, int]:
-    """(samples, first stamp, its log time, last stamp) in ns, from the bag's index and its
-    first and last position messages (the last read through the time index)."""
+def _position(path: Path, reader: Any, namespace: str | None) -> tuple[str, list[Any]]:
+    """The topic whose messages count the samples (position, or the joint states) and its
+    connections."""
     found = {c.topic: c.msgtype for c in reader.connections}
     layout = _choose_layout(path, found, namespace)
     topic = layout.get("joint_state") or layout[tp.POSITION]
-    conns = [c for c in reader.connections if c.topic == topic]
-    count = sum(int(c.msgcount) for c in conns)
+    return topic, [c for c in reader.connections if c.topic == topic]
+
+
+def _ends(path: Path, reader: Any, topic: str, conns: list[Any]) -> tuple[int, int, int]:
+    """(first stamp, its log time, last stamp) in ns, from the first and last position
+    messages (the last read through the time index)."""
     first = next(mcap_messages.messages(reader, conns), None)
     if first is None:
         raise BagError(f"{path}: no messages on {topic} (empty recording)")
     stamp0 = _stamp(first[0], first[2])
     tail = mcap_messages.messages(reader, conns, max(0, reader.end_time - MARGIN_NS))
     last = max((_stamp(conn, data) for conn, _, data in tail), default=stamp0)
-    return count, stamp0, int(first[1]), last
+    return stamp0, int(first[1]), last
 
 
 def read_excerpt(path: str | Path, *, namespace: str | None = None,
@@ -83,10 +87,14 @@ def _read_excerpt(path: Path, reader: Any, namespace: str | None, max_samples: i
         return loaded
 
     with reading(path):
-        count, stamp0, log0, stamp1 = _extent(path, reader, namespace)
-    if count <= max_samples or stamp1 <= stamp0:
+        topic, conns = _position(path, reader, namespace)
+        count = sum(int(c.msgcount) for c in conns)  # from the bag's index
+        # a bag read whole needs no stamps of its ends (each look parses a chunk again)
+        ends = None if 0 < count <= max_samples else _ends(path, reader, topic, conns)
+    if ends is None or count <= max_samples or ends[2] <= ends[0]:
         whole = read(None).recording
         return excerpt_of(whole, plan_spans(len(whole), max_samples, split))
+    stamp0, log0, stamp1 = ends
     period = (stamp1 - stamp0) / (count - 1)  # ns per sample
     parts = []
     for a, b in plan_spans(count, max_samples, split):
