@@ -1,6 +1,6 @@
-"""Welch spectra and peak finding without scipy.signal (core/recording/spectra.py): the same numbers
-as SciPy's (the peer), and a live worker that fits windows and analyses their models
-imports neither scipy.signal nor scipy.stats (what that module is for)."""
+"""Welch spectra and peak finding without scipy.signal (core/recording/spectra.py): the
+same numbers as SciPy's (the peer), and a live worker that fits windows and analyses their
+models imports neither scipy.signal nor scipy.stats (what that module is for)."""
 
 from __future__ import annotations
 

@@ -16,8 +16,9 @@ WATCHED = ("scipy.signal", "scipy.stats")
 
 
 class FitAndAnalyse:
-    """``probe(window)``: the tracker's result for the window and the GFRF analysis of each
-    model it produced (as the GFRF node receives them, JSON text)."""
+    """``probe(window)``: how many models and cross-validations the tracker made of the
+    window, how many of its models were analysed (each as the GFRF node receives it, JSON
+    text), and which of :data:`WATCHED` the process holds by then."""
 
     def __init__(self, params: dict[str, Any]) -> None:
         self.tracker = WindowTracker(tracker_config(params))

@@ -68,8 +68,9 @@ def _local_maxima(x: FloatArray) -> IntArray:
 
 def _reach(x: FloatArray, i: int, step: int) -> int:
     """The first index from ``i`` (exclusive) in direction ``step`` holding a sample higher
-    than ``x[i]``, or one past the end; searched in doubling spans (peaks are usually
-    close to a higher neighbour, and a whole-signal scan per peak grows as n times peaks)."""
+    than ``x[i]``, or one past the end; searched in spans growing fourfold (a peak is
+    usually close to a higher sample, and a whole-signal scan per peak grows as the
+    signal's length times its peaks)."""
     top, span, n = x[i], 64, len(x)
     while True:
         lo, hi = (i + 1, min(i + 1 + span, n)) if step > 0 else (max(i - span, 0), i)
