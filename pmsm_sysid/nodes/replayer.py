@@ -1,7 +1,9 @@
 """ReplayerNode: publishes a recording's serialized messages on their recorded topics and types.
 
 The CDR bytes go out unchanged (rclpy publishers accept ``bytes``), so a replayed message is
-bit-for-bit the recorded one. Phases, driven by a 1 ms timer:
+bit-for-bit the recorded one. Phases, driven by a timer that ticks every 1 ms while playing
+and every 10 ms otherwise (a replay waiting for its subscribers wakes the executor, and every
+node it spins, a tenth as often):
 
 1. **wait** until every topic to wait for has ``subscribers`` matched subscriptions (the
    publisher's DDS ``matched`` event, not the graph cache, which can run ahead of the DDS
@@ -39,6 +41,10 @@ from ..core.errors import BagError
 from ..rosutil import SLACK_DEPTH, data_qos, message_class
 from ..topics import INPUT_TYPES
 from .health import HealthPublisher, replay_health
+
+#: The phases' timer periods (s): pacing the playback, and waiting, settling or lingering.
+PLAY_TICK_S = 0.001
+IDLE_TICK_S = 0.01
 
 # --- planning (no ROS) --------------------------------------------------------------------
 
@@ -179,7 +185,7 @@ class ReplayerNode(Node):
         self._pass: _Pass | None = None
         self._t0: tuple[float, int] | None = None  # (monotonic, first bag time) of playback
         self._resume = 0.0
-        self._timer = self.create_timer(0.001, self._on_timer)
+        self._timer = self.create_timer(IDLE_TICK_S, self._on_timer)
         self.health = HealthPublisher(self, "replay", replay_health(self))
 
     def _publisher(self, topic: str, msgtype: str) -> Any:
@@ -203,6 +209,7 @@ class ReplayerNode(Node):
         elif self._phase == "settle":
             if now - self._phase_t >= self.settle_s:
                 self._phase = "play"
+                self._tick(PLAY_TICK_S)
                 self.stats.at_start = {t: self.matched.get(t, 0) for t in self.remap.values()}
                 self._start_pass(0)
         elif self._phase == "play":
@@ -211,6 +218,9 @@ class ReplayerNode(Node):
         elif self._phase == "linger" and now - self._phase_t >= self.linger_s:
             self._phase, self.finished = "done", True
             self._timer.cancel()  # type: ignore[no-untyped-call]
+
+    def _tick(self, period_s: float) -> None:
+        self._timer.timer_period_ns = round(period_s * 1e9)
 
     def _start_pass(self, index: int) -> None:
         self._pass = _Pass(index, iter_raw(self.path, self.topics))
@@ -252,6 +262,7 @@ class ReplayerNode(Node):
             self._pass.pending = None
         else:
             self._phase, self._phase_t = "linger", now
+            self._tick(IDLE_TICK_S)
         if self.rate == 0:
             self._resume = now + sum(sent.values()) / self.drain_rate
 
