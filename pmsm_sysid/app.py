@@ -135,13 +135,17 @@ class Pipeline:
                 self._take_pending()
             self.executor.spin_once(timeout_sec=wait)
 
-    def _take_pending(self) -> None:
+    def _take_pending(self, all_of_it: bool = False) -> None:
         """The consumers here take the samples just published, without a round of the
-        executor each (its wait set costs more than a burst's messages)."""
-        if self.identifier is not None:
-            self.identifier.take_pending()
-        if self.diagnose is not None:
-            self.diagnose.take_pending()
+        executor each (its wait set costs more than a burst's messages); ``all_of_it``:
+        until none is left (one call takes a bounded burst)."""
+        while True:
+            before = [e.samples_received for e in self.consumers]
+            for node in (self.identifier, self.diagnose):
+                if node is not None:
+                    node.take_pending()
+            if not all_of_it or [e.samples_received for e in self.consumers] == before:
+                return
 
     def _caught_up(self) -> bool:
         return all(e.samples_received >= self.sim.published for e in self.consumers)
@@ -197,6 +201,10 @@ class Pipeline:
             self.sim.stop_timer()
             for pub in self.sim.publishers:
                 pub.wait_for_all_acked(Duration(seconds=min(timeout_s, 2.0)))
+            # what it published before it stopped is taken now, before the windows are
+            # flushed: a wall-clock run stops with a burst still in the queues (the executor
+            # hands a burst over a round after it is published)
+            self._take_pending(all_of_it=True)
         if ident is not None:
             if self.sim is not None:
                 ident.end_of_input()
