@@ -12,14 +12,18 @@ from pmsm_sysid.core.recording.spectra import find_peaks, hann, welch
 
 
 def _signals(seed: int, count: int) -> list[np.ndarray]:
-    """Random walks, coarse noise with flat tops (plateaus of every length), and the
-    shortest signals, from 0 to 300 samples."""
+    """Random walks, coarse noise with flat tops (plateaus of every length), flat or high
+    ends, and the shortest signals, from 0 to 300 samples."""
     rng = np.random.default_rng(seed)
     out = [np.zeros(0), np.ones(1), np.array([0.0, 1.0]), np.array([0.0, 1.0, 0.0]),
            np.array([0.0, 1.0, 1.0, 0.0]), np.array([1.0, 1.0, 0.0, 1.0, 1.0])]
     for k in range(count):
         n = int(rng.integers(0, 300))
         x = np.cumsum(rng.standard_normal(n)) if k % 2 else np.round(rng.standard_normal(n))
+        if k % 5 == 0 and n > 3:  # a flat start, or a flat end above everything
+            x[:n // 4] = x[n // 4]
+        if k % 7 == 0 and n > 3:
+            x[-(n // 5 + 1):] = x.max() + 1.0
         out.append(x)
     return out
 
