@@ -63,6 +63,12 @@ class Window:
                          speed_derived=self.speed_derived, source=f"window {self.seq}")
 
 
+def _check_sizes(window: int, hop: int, history: int) -> None:
+    if window < 2 or hop < 1 or history < 0:
+        raise DataError(f"need window >= 2, hop >= 1, history >= 0 (got {window}, {hop}, "
+                        f"{history})")
+
+
 class WindowScheduler:
     """Ring of the latest samples; cuts a window whenever ``(index + 1) % hop == 0``.
 
@@ -72,9 +78,7 @@ class WindowScheduler:
 
     def __init__(self, window: int = 1000, hop: int = 250, history: int = 0,
                  n_signals: int = len(SIGNALS), signals: Sequence[str] = SIGNALS) -> None:
-        if window < 2 or hop < 1 or history < 0:
-            raise DataError(f"need window >= 2, hop >= 1, history >= 0 (got {window}, {hop}, "
-                            f"{history})")
+        _check_sizes(window, hop, history)
         self.window, self.hop, self.history = window, hop, history
         self.signals = tuple(signals)
         self.capacity = window + history
@@ -90,9 +94,7 @@ class WindowScheduler:
         """New window, hop and history from the next sample on. The newest contiguous
         samples are kept (as many as the new ring holds), so the next window is cut as soon
         as the new ring is full of contiguous data and the hop grid says so."""
-        if window < 2 or hop < 1 or history < 0:
-            raise DataError(f"need window >= 2, hop >= 1, history >= 0 (got {window}, {hop}, "
-                            f"{history})")
+        _check_sizes(window, hop, history)
         capacity = window + history
         keep = min(self._run, self.capacity, capacity)
         order = np.r_[self._head:self.capacity, 0:self._head][self.capacity - keep:]
