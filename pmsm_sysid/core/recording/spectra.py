@@ -54,9 +54,12 @@ def welch(x: NDArray[np.float64], fs: float = 1.0, nperseg: int = 256,
     return freqs, psd
 
 
-def _local_maxima(x: FloatArray) -> IntArray:
+def local_maxima(x: FloatArray) -> IntArray:
     """Indices of the samples higher than both neighbours (the middle of a flat top, left
-    of centre for an even one); never the first or the last sample."""
+    of centre for an even one); never the first or the last sample: the peaks of
+    :func:`find_peaks` without their prominences."""
+    if len(x) < 3:
+        return np.zeros(0, dtype=np.intp)
     change = np.flatnonzero(x[1:] != x[:-1]) + 1
     starts = np.concatenate(([0], change))
     ends = np.concatenate((change - 1, [len(x) - 1]))
@@ -114,7 +117,7 @@ def find_peaks(x: NDArray[np.float64], prominence: float | None = None,
     x = np.asarray(x, dtype=np.float64)
     if x.ndim != 1:
         raise ValueError(f"need a 1-D signal, got shape {x.shape}")
-    peaks = _local_maxima(x) if len(x) > 2 else np.zeros(0, dtype=np.intp)
+    peaks = local_maxima(x)
     prom = prominences(x, peaks)
     if prominence is not None:
         keep = prom >= prominence
@@ -122,4 +125,4 @@ def find_peaks(x: NDArray[np.float64], prominence: float | None = None,
     return peaks, prom
 
 
-__all__ = ["find_peaks", "hann", "prominences", "welch"]
+__all__ = ["find_peaks", "hann", "local_maxima", "prominences", "welch"]

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import DataError, InsufficientExcitationError
-from ..recording.spectra import find_peaks, welch
+from ..recording.spectra import local_maxima, welch
 
 FloatArray = NDArray[np.float64]
 
@@ -136,7 +136,7 @@ _LOCAL = np.r_[-24:-8, 9:25]  # the neighbourhood of a line, the line's own +-8 
 
 def _lines(p: FloatArray) -> list[int]:
     """Indices of narrow spectral lines (see the module docstring)."""
-    peaks, _ = find_peaks(np.concatenate(([0.0], p, [0.0])))
+    peaks = local_maxima(np.concatenate(([0.0], p, [0.0])))
     peaks = peaks - 1
     peaks = peaks[p[peaks] > float(p.max()) * 10 ** (-LINE_DB_BELOW_MAX / 10)]
     local = np.zeros(len(peaks))
