@@ -52,6 +52,7 @@ def pipeline_summary(pipe: Pipeline) -> dict[str, Any]:
         "last_ridges_by_output": ridges, "last_validations": vals,
         "validation_counts": ({k: list(v) for k, v in ident.validation_counts.items()}
                               if ident is not None else {}),
+        "window_grid": ident.window_grid() if ident is not None else None,
         "models_published": ident.models_published if ident is not None else None,
         "change_events": (list(ident.last["changes"]) if ident is not None
                           else list(col.changes) if col is not None else []),

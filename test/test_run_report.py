@@ -140,5 +140,5 @@ def test_the_run_page_reads_right_for_a_wall_clock_run(tmp_path: Path) -> None:
     assert "The last speed model (window 13): its fit and correlation tests" in page
     assert "verdict pass" in page
     assert ("speed windows 50/52 passed their cross-validation, 2 failed: consistent with a "
-            "correct model, which fails 1 in 20 by chance; binomial p = 0.74") in page
+            "correct model, which fails 1 in 20 by chance; p = 0.74") in page
     assert "stable, 1 pole, largest radius" in page and "1 poles" not in page

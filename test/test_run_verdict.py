@@ -47,11 +47,11 @@ def test_a_passing_run_says_pass_with_its_figures() -> None:
 def test_a_failure_names_the_output_and_the_test() -> None:
     s = _summary()
     s["last_validations"]["position"] = _validation("position", failed=("ee", "u2e"))
-    s["validation_counts"]["position"] = [40, 52]  # 12 failures: p = 8e-6 at a 1 in 20 rate
+    s["validation_counts"]["position"] = [40, 52]  # 12 failures: p = 3e-4 at a 1 in 20 rate
     line = headline(s)
     assert line.startswith("FAIL: position validation FAIL: 12 of 52 windows failed, more "
-                           "than the 1 in 20 a correct model fails by chance (binomial p = "
-                           "7.7e-06 < 0.01); the latest window: correlation tests ee, u2e "
+                           "than the 1 in 20 a correct model fails by chance (p = "
+                           "0.00033 < 0.01); the latest window: correlation tests ee, u2e "
                            "failed on its estimation window (free-run R2 0.9960, 40/52 "
                            "windows passed)"), line
     assert "speed validation pass" in line  # the output that passed is still reported
@@ -63,10 +63,12 @@ def test_a_failure_names_the_output_and_the_test() -> None:
 
 def test_the_run_is_judged_by_its_windows_not_by_the_latest() -> None:
     """The correlation tests reject a correct model in about 1 window in 20: a latest window
-    failing one test while the run's failures stay consistent with Binomial(52, 0.05) at
-    1 % is a pass that names the latest failure as a detail; 8 or more failures of 52 are
-    not (P(X >= 8) = 0.0089); a latest free run below min_r2 is never chance."""
-    from scipy.stats import binom
+    failing one test while the run's failures stay consistent with that rate at 1 % is a
+    pass that names the latest failure as a detail. The windows overlap (a hop of 250 in
+    1000 samples), so the count of 52 is judged as 52 / phi windows (phi = 1.56): 8 failures
+    of 52 are a pass, 9 are not; with windows far apart the binomial tail itself (8
+    failures: P(X >= 8) = 0.0041). A latest free run below min_r2 is never chance."""
+    from scipy.stats import beta, binom
 
     s = _summary()
     s["last_validations"]["position"] = _validation("position", failed=("u2e2",))
@@ -78,18 +80,39 @@ def test_the_run_is_judged_by_its_windows_not_by_the_latest() -> None:
                                "20 by chance; the latest window: correlation test u2e2 failed "
                                "on its estimation window)")
     assert headline(s).startswith("pass: speed validation pass")
-    # scipy.stats (Boost) as the independent truth of the binomial tail used here
-    assert v["windows"]["position"]["p_value"] == pytest.approx(binom.sf(5, 52, 0.05), rel=1e-12)
-    s["validation_counts"]["position"] = [45, 52]
-    assert verdict(s)["status"] == "pass"
+    # scipy.stats (Boost) as the independent truth of the tail used here
+    phi = v["windows"]["position"]["dispersion"]
+    assert phi == pytest.approx(1.561, abs=1e-3)
+    assert v["windows"]["position"]["p_value"] == pytest.approx(
+        beta.cdf(0.05, 6 / phi, (52 - 6) / phi + 1), rel=1e-12)
     s["validation_counts"]["position"] = [44, 52]
+    assert verdict(s)["status"] == "pass"
+    s["validation_counts"]["position"] = [43, 52]
+    assert verdict(s)["status"] == "FAIL"
+    s["validation_counts"]["position"] = [44, 52]
+    s["window_grid"] = {"window": 1000, "hop": 2000}  # windows far apart: independent
     assert binom.sf(7, 52, 0.05) < 0.01 < binom.sf(6, 52, 0.05)
     assert verdict(s)["status"] == "FAIL"
+    assert verdict(s)["windows"]["position"]["p_value"] == pytest.approx(binom.sf(7, 52, 0.05),
+                                                                         rel=1e-12)
     # the latest window passed, but the run's windows failed too often: still FAIL
     s["last_validations"]["position"] = _validation("position")
     assert verdict(s)["status"] == "FAIL"
     s["validation_counts"]["position"] = [50, 52]
     s["last_validations"]["position"] = _validation("position", r2=0.8)
+    assert verdict(s)["status"] == "FAIL"
+
+
+def test_a_small_hop_needs_more_failed_windows_than_the_default() -> None:
+    """With a hop of 50 (windows sharing 95 % of their samples, 81 windows in 5 s of data)
+    failures come in long runs: 12 of 81 is a pass there, a FAIL at the default hop."""
+    s = _summary()
+    s["validation_counts"]["position"] = [69, 81]
+    assert verdict(s)["status"] == "FAIL"
+    s["window_grid"] = {"window": 1000, "hop": 50}
+    v = verdict(s)
+    assert v["status"] == "pass" and v["windows"]["position"]["dispersion"] > 4
+    s["validation_counts"]["position"] = [41, 81]  # half of them: wrong whatever the hop
     assert verdict(s)["status"] == "FAIL"
 
 

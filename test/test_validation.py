@@ -159,12 +159,13 @@ def test_validate_reports_divergence() -> None:
 
 def test_the_binomial_limits_are_scipy_stats_quantiles() -> None:
     """The correlation tests' count limit and Bonferroni point (computed with scipy.special)
-    equal scipy.stats' binomial and normal quantiles, and the window test's tail its
-    survival function."""
+    equal scipy.stats' binomial and normal quantiles; the window test's tail is the binomial
+    survival function for windows that do not overlap, and for overlapping ones the
+    binomial's continued to failed / phi of made / phi windows (scipy.stats' beta law)."""
     from scipy import stats
 
     from pmsm_sysid.core.validation import correlation
-    from pmsm_sysid.core.validation.windows import NULL_RATE, window_rate
+    from pmsm_sysid.core.validation.windows import NULL_RATE, dispersion, window_rate
 
     for n_lags in range(1, 201):
         assert correlation._binomial_limit(n_lags) == int(
@@ -174,8 +175,50 @@ def test_the_binomial_limits_are_scipy_stats_quantiles() -> None:
     for made in (1, 12, 52, 120):
         for failed in range(1, made + 1):
             want = float(stats.binom.sf(failed - 1, made, NULL_RATE))
-            got = window_rate(made - failed, made)["p_value"]
+            got = window_rate(made - failed, made, shift=1.6)["p_value"]
             assert got == pytest.approx(want, rel=1e-9, abs=1e-300)
+            phi = dispersion(made)
+            assert phi >= 1.0
+            k, n = failed / phi, made / phi
+            want = float(stats.beta.cdf(NULL_RATE, k, n - k + 1))
+            assert window_rate(made - failed, made)["p_value"] == pytest.approx(
+                want, rel=1e-9, abs=1e-300)
+
+
+def test_the_dispersion_is_the_variance_of_overlapping_windows_failed_count(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Windows that share samples pass and fail together: simulated outcomes of m-sample
+    windows at a hop of one sample (a window fails when its samples' mean is high, about 1
+    in 20), their correlation by shift measured and given to :func:`dispersion` as its
+    table; the variance of the failed count over many runs of n windows is then phi times
+    the binomial variance, and the test's false alarms stay within its level where the
+    plain binomial test's do not."""
+    from scipy import stats
+
+    from pmsm_sysid.core.validation import windows
+
+    rng = np.random.default_rng(7)
+    m, n, runs = 8, 24, 4000
+    z = rng.standard_normal((runs, n + m - 1))
+    means = np.lib.stride_tricks.sliding_window_view(z, m, axis=1).mean(axis=2)
+    fail = means > stats.norm.ppf(1 - windows.NULL_RATE) / np.sqrt(m)  # (runs, n)
+    f = fail.ravel().astype(float)
+    p = fail.mean()
+    rho = [1.0] + [float(np.mean((fail[:, :-k] - p) * (fail[:, k:] - p)) / (p * (1 - p)))
+                   for k in range(1, m)] + [0.0]
+    table = tuple((k / m, r) for k, r in enumerate(rho))
+    monkeypatch.setattr(windows, "_SHIFTS", np.array([t[0] for t in table]))
+    monkeypatch.setattr(windows, "_RHO", np.array([t[1] for t in table]))
+    counts = fail.sum(axis=1)
+    measured = counts.var() / (n * p * (1 - p))
+    assert f.mean() == pytest.approx(0.05, abs=0.01)
+    assert measured > 2.0  # far from independent windows
+    assert windows.dispersion(n, 1.0 / m) == pytest.approx(measured, rel=0.1)
+    alarms = np.mean([not windows.window_rate(n - c, n, 1.0 / m)["consistent"]
+                      for c in counts])
+    plain = np.mean([stats.binom.sf(c - 1, n, windows.NULL_RATE) < windows.LEVEL
+                     for c in counts])
+    assert alarms <= windows.LEVEL * 1.5 < 3 * windows.LEVEL < plain, (alarms, plain)
 
 
 def test_the_input_limits_are_the_count_limits_of_each_input_and_shared_by_residuals() -> None:

@@ -45,7 +45,8 @@ same excitation only; on a stationary plant it stays quiet under every packaged 
 The summary line leads with the verdict: pass, warning or FAIL. Each output is judged by
 its windows together: the correlation tests reject a correct model in about 1 window in 20
 by chance, so the output fails only when its windows fail significantly more often than
-that (one-sided binomial test at 1 %) or its latest free run fails; a chance failure of the
+that (one-sided binomial test at 1 %, widened for the overlap of the windows, which pass
+and fail together) or its latest free run fails; a chance failure of the
 latest window is named as a detail of a pass.
 --diagnose PLANT.yaml adds the live diagnosis: every diagnose.period_s (10 s of data) the
 latest diagnose.span_s (30 s) of the inputs are diagnosed in a worker process, as

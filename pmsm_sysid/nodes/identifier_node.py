@@ -395,9 +395,11 @@ class IdentifierNode(Node):
                 count[0] += bool(v["pass"])
                 count[1] += 1
             score = {d["output"]: d for d in r.decisions}  # the change detector, per output
+            grid = self.window_grid()
+            shift = grid["hop"] / grid["window"]
             arr = DiagnosticArray(status=[validation_status(
                 v, score.get(v["output"]), float(self.params["change.s_confirm"]),
-                self.validation_counts.get(v["output"])) for v in r.validations])
+                self.validation_counts.get(v["output"]), shift) for v in r.validations])
             arr.header.stamp = stamp
             self._val_pub.publish(arr)
         if r.changes:
@@ -412,6 +414,10 @@ class IdentifierNode(Node):
                     f"{c['reasons']}")
 
     # ------------------------------------------------------------------ summary
+    def window_grid(self) -> dict[str, int]:
+        """The windows' length and hop in samples (the run verdict's overlap)."""
+        return {"window": int(self.params["window"]), "hop": int(self.params["hop"])}
+
     def summary(self) -> dict[str, Any]:
         """Counters and the latest results (the ``run --json`` summary's identifier part)."""
         return {**self.engine.stats.to_dict(), "inputs": self.input_report().to_dict(),
@@ -421,6 +427,7 @@ class IdentifierNode(Node):
                 "models": dict(self.last["models"]),
                 "validation": dict(self.last["validation"]),
                 "validation_counts": {k: list(v) for k, v in self.validation_counts.items()},
+                "window_grid": self.window_grid(),
                 "change_events": list(self.last["changes"]), "errors": list(self.errors)}
 
     def destroy_node(self) -> None:

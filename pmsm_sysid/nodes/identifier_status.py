@@ -24,10 +24,12 @@ def status(name: str, level: bytes, message: str, hardware_id: str,
 
 def validation_status(v: dict[str, Any], decision: dict[str, Any] | None = None,
                       threshold: float | None = None,
-                      count: list[int] | None = None) -> DiagnosticStatus:
+                      count: list[int] | None = None,
+                      shift: float | None = None) -> DiagnosticStatus:
     """One window's cross-validation, with the run's windows so far (``count``: passed,
-    made) judged as the run summary judges them (binomial test against 1 in 20)."""
-    from ..core.validation.windows import window_rate
+    made; ``shift``: the hop over the window, default the identifier's defaults') judged
+    as the run summary judges them (against 1 in 20, allowing for the windows' overlap)."""
+    from ..core.validation.windows import DEFAULT_SHIFT, window_rate
 
     fr = v["free_run"]
     n_est = sum(t["pass"] for t in v["correlation_tests"].values())
@@ -39,12 +41,12 @@ def validation_status(v: dict[str, Any], decision: dict[str, Any] | None = None,
               "diverged": fr["diverged"], "osa_r2": v["osa_r2"], "min_r2": v["min_r2"],
               "validated_on": v["validated_on"], "pass": v["pass"]}
     if count:
-        rate = window_rate(*count)
+        rate = window_rate(count[0], count[1], shift=DEFAULT_SHIFT if shift is None else shift)
         values.update(windows_passed=count[0], windows_validated=count[1],
                       run_p_value=rate["p_value"], run_consistent=rate["consistent"])
         msg += (f"; run: {count[0]}/{count[1]} windows passed, "
                 + ("as a correct model does (1 in 20 fail by chance)" if rate["consistent"]
-                   else f"more failures than chance (binomial p = {rate['p_value']:.2g})"))
+                   else f"more failures than chance (p = {rate['p_value']:.2g})"))
     for prefix, key in (("corr", "correlation_tests"),
                         ("corr_next", "correlation_tests_validation")):
         for name, t in v[key].items():
