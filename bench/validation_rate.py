@@ -18,13 +18,15 @@ small for the plant shows what a wrong structure does). Deterministic.
 by offsets spread evenly over the hop (what the epoch-derived index of a wall-clock run
 does), each through a fresh tracker; the counts above are then over all grids. Per output it
 adds the correlation rho(d) of two windows' outcomes (failed = 1) at a shift of d windows
-(start difference / window length, d = 0.05 ... 2.0) over all windows of all grids, each
+(start difference / window length, d = 0.05 ... 3.0) over all windows of all grids, each
 paired with the window starting nearest to d later if within half a step of d ("n/a": too
 few are, e.g. below the hop with one grid); and per run length the dispersion of the failed
 count over the runs (its variance / the binomial variance at the runs' failure rate) beside
 the dispersion phi(n, s) = 1 + (2/n) sum_{k=1}^{n-1} (n - k) rho(k s) that this rho gives
-(s = hop / window, rho linear between its shifts, 0 beyond 2 windows) and the share of runs
-not judged pass. Runs of different grids share their data, so they are not independent runs.
+(s = hop / window, rho linear between its shifts, 0 beyond 3 windows), the dispersion the
+verdict assumes (:func:`pmsm_sysid.core.validation.windows.dispersion`, from its table of rho)
+and the share of runs not judged pass. Runs of different grids share their data, so they
+are not independent runs.
 
     .venv/bin/python bench/validation_rate.py [--duration 600] [--excitation broadband]
                                               [--set position.terms=2] [--phases 20]
@@ -50,13 +52,14 @@ from pmsm_sysid.core.online.tracker import WindowTracker, tracker_config
 from pmsm_sysid.core.online.windows import WindowScheduler
 from pmsm_sysid.core.physics.plant import load_plant
 from pmsm_sysid.core.validation.correlation import window_false_rejection_rate
+from pmsm_sysid.core.validation.windows import dispersion as verdict_dispersion
 from pmsm_sysid.nodes.identifier_node import DEFAULTS
 
 RUNS_S = (10, 30, 60)
 #: Seconds at the start of a CLI run that give no validated window (8 hops of 250 samples).
 LOST_S = 4.0
 #: Shifts of rho(d), in windows.
-SHIFTS = tuple(round(0.05 * k, 2) for k in range(1, 41))
+SHIFTS = tuple(round(0.05 * k, 2) for k in range(1, 61))
 #: rho(d) needs this share of the windows to have a partner d windows later.
 MIN_PAIRED = 0.2
 
@@ -109,20 +112,21 @@ def _outcomes(args: argparse.Namespace, params: dict[str, Any]) -> dict[str, lis
     return out
 
 
-def _runs(seqs: list[list[bool]], per_run: int) -> dict[str, Any]:
-    """Consecutive runs of ``per_run`` windows of each grid: how many the verdict does not
-    judge consistent with a correct model, and the dispersion of their failed count."""
+def _runs(seqs: list[list[bool]], per_run: int, shift: float) -> dict[str, Any]:
+    """Consecutive runs of ``per_run`` windows (``shift``: hop / window) of each grid: how
+    many the verdict does not judge consistent with a correct model, and the dispersion of
+    their failed count."""
     failed, flagged = [], 0
     for seq in seqs:
         for k in range(0, len(seq) - per_run + 1, per_run):
             chunk = seq[k:k + per_run]
             failed.append(per_run - sum(chunk))
-            flagged += not window_rate(sum(chunk), per_run)["consistent"]
+            flagged += not window_rate(sum(chunk), per_run, shift=shift)["consistent"]
     rate = sum(failed) / max(1, len(failed) * per_run)
     dispersion = (float(np.var(failed, ddof=1)) / (per_run * rate * (1 - rate))
                   if len(failed) > 1 and 0 < rate < 1 else None)
     return {"windows": per_run, "runs": len(failed), "not_pass": flagged,
-            "dispersion": dispersion}
+            "dispersion": dispersion, "verdict_phi": verdict_dispersion(per_run, shift)}
 
 
 def _rho(grids: list[Rows], window: int) -> dict[float, float | None]:
@@ -166,7 +170,9 @@ def _output(grids: list[Rows], params: dict[str, Any], hop_s: float,
     failed = [{i for i, ok in enumerate(seq) if not ok} for seq in seqs]
     paired = sum(1 for f in failed for i in f if {i - 1, i + 1} & f)
     tests = collections.Counter(t for rows in grids for r in rows for t in r["failed"])
-    runs = {f"{s} s": _runs(seqs, max(1, round((s - LOST_S) / hop_s))) for s in RUNS_S}
+    shift = int(params["hop"]) / int(params["window"])
+    runs = {f"{s} s": _runs(seqs, max(1, round((s - LOST_S) / hop_s)), shift)
+            for s in RUNS_S}
     res: dict[str, Any] = {
         "windows": sum(map(len, seqs)), "failed": sum(map(len, failed)),
         "with_failed_neighbour": paired, "tests": dict(tests),
@@ -199,7 +205,8 @@ def _print(output: str, res: dict[str, Any]) -> None:
     for k, r in res["runs"].items():
         share = 100 * r["not_pass"] / max(1, r["runs"])
         print(f"    runs of {k} ({r['windows']} windows): dispersion {_num(r['dispersion'])} "
-              f"(phi from rho {_num(r['phi'])}), not pass {r['not_pass']}/{r['runs']} "
+              f"(phi from rho {_num(r['phi'])}, the verdict's {_num(r['verdict_phi'])}), "
+              f"not pass {r['not_pass']}/{r['runs']} "
               f"= {share:.1f} %")
 
 

@@ -24,7 +24,9 @@ of ``d`` windows is ``rho(d)`` (``s`` = hop / window), and the test is the binom
 regularised incomplete beta function). :data:`OUTCOME_CORRELATION` is ``rho``, the larger of
 the speed and position outputs' correlations measured on the default run over 20 grid phases
 (``bench/validation_rate.py --phases``); windows more than 1.6 windows apart are independent
-(the tail before it is the excitation's 4 s period). With windows that far apart the test
+(the tail before it is the excitation's 4 s period). On 2400 simulated seconds beyond those it
+was measured on, the test said FAIL for 3 of 399 10 s runs at the default hop and for 4 of
+399 at a hop of 50 (the binomial test: 6 and 38). With windows that far apart the test
 is the plain binomial one.
 """
 
