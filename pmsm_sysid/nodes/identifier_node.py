@@ -60,7 +60,7 @@ from ..topics import (
 )
 from .defaults import IDENTIFIER_DEFAULTS
 from .health import HealthPublisher, IdentifierHealth
-from .identifier_status import OK, WARN, change_status, status, validation_status
+from .identifier_status import OK, WARN, change_status, status, validation_statuses
 from .numbers import NumberPublisher
 from .params import (
     IDENTIFIER_SPECS,
@@ -394,12 +394,9 @@ class IdentifierNode(Node):
                 count = self.validation_counts.setdefault(v["output"], [0, 0])
                 count[0] += bool(v["pass"])
                 count[1] += 1
-            score = {d["output"]: d for d in r.decisions}  # the change detector, per output
-            grid = self.window_grid()
-            shift = grid["hop"] / grid["window"]
-            arr = DiagnosticArray(status=[validation_status(
-                v, score.get(v["output"]), float(self.params["change.s_confirm"]),
-                self.validation_counts.get(v["output"]), shift) for v in r.validations])
+            arr = DiagnosticArray(status=validation_statuses(
+                r.validations, r.decisions, float(self.params["change.s_confirm"]),
+                self.validation_counts, self.window_grid()))
             arr.header.stamp = stamp
             self._val_pub.publish(arr)
         if r.changes:

@@ -4,6 +4,7 @@ cross-validation, with the run's windows so far, and a detected plant change."""
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -58,6 +59,18 @@ def validation_status(v: dict[str, Any], decision: dict[str, Any] | None = None,
                       change_threshold=threshold)
     return status(f"identifier/cross_validation/{v['output']}", OK if v["pass"] else WARN,
                   msg, v["model_id"], values)
+
+
+def validation_statuses(validations: Sequence[dict[str, Any]],
+                        decisions: Sequence[dict[str, Any]],
+                        threshold: float, counts: dict[str, list[int]],
+                        grid: dict[str, int]) -> list[DiagnosticStatus]:
+    """One window's validations, each with its output's change decision and run count
+    (``grid``: the identifier's window and hop)."""
+    score = {d["output"]: d for d in decisions}  # the change detector, per output
+    shift = grid["hop"] / grid["window"]
+    return [validation_status(v, score.get(v["output"]), threshold, counts.get(v["output"]),
+                              shift) for v in validations]
 
 
 def change_status(c: dict[str, Any]) -> DiagnosticStatus:
