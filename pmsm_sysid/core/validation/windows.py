@@ -5,7 +5,7 @@ The correlation tests (:mod:`.correlation`) reject a correct model in some windo
 chance: 4.1 % for white residuals by their own rule
 (:func:`~.correlation.window_false_rejection_rate`); over one simulated hour of the default
 live run 4.2 % of the position and 5.1 % of the speed windows failed (the speed residual keeps
-a trace of the speed sensor's noise), and 4.3 % and 3.8 % over 400 simulated seconds cut at
+a trace of the speed sensor's noise), and 3.8 % and 4.3 % over 400 simulated seconds cut at
 20 grid phases. A run's count of failed windows is therefore compared with :data:`NULL_RATE`,
 1 in 20, by a one-sided test at :data:`LEVEL`, 1 %.
 
@@ -24,10 +24,10 @@ of ``d`` windows is ``rho(d)`` (``s`` = hop / window), and the test is the binom
 regularised incomplete beta function). :data:`OUTCOME_CORRELATION` is ``rho``, the larger of
 the speed and position outputs' correlations measured on the default run over 20 grid phases
 (``bench/validation_rate.py --phases``); windows more than 1.6 windows apart are independent
-(the tail before it is the excitation's 4 s period). On 2400 simulated seconds beyond those it
-was measured on, the test said FAIL for 3 of 399 10 s runs at the default hop and for 4 of
-399 at a hop of 50 (the binomial test: 6 and 38). With windows that far apart the test
-is the plain binomial one.
+(the tail before it is the excitation's 4 s period), and for windows that far apart the test
+is the plain binomial one. On 2400 simulated seconds beyond those the table was measured on,
+the test said FAIL for 3 of 399 10 s runs at the default hop and for 4 of 399 at a hop of 50
+(the binomial test: 6 and 38).
 """
 
 from __future__ import annotations
