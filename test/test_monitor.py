@@ -182,6 +182,20 @@ def test_view_fits_80_columns_plainly() -> None:
     assert max(len(line) for line in wide.splitlines()) <= 120
 
 
+def test_the_validation_title_is_one_line_above_a_narrow_table() -> None:
+    """Passing windows make a narrow table; it is as wide as its title, which stays whole
+    on a 100-column terminal (it wrapped mid-phrase)."""
+    v = SysIdView()
+    corr = json.dumps({"max_abs": 0.05, "band": 0.062, "pass": True, "n_outside": 0,
+                       "n_lags": 20, "n_allowed": 4})
+    values = {"r2": "0.997", "min_r2": "0.9", "diverged": "false", "corr.ee": corr,
+              "windows_passed": "27", "windows_validated": "27", "run_consistent": "true"}
+    v.on_validation([{"name": "identifier/cross_validation/speed", "level": 0,
+                      "message": "window pass", "values": values}])
+    lines = [ln.rstrip() for ln in render(_snap(v), 1.0, width=100).splitlines()]
+    assert "validation (run: windows passed; a correct model fails 1 in 20)" in lines, lines
+
+
 def test_a_failed_window_of_a_run_that_passes_reads_as_chance() -> None:
     """The identifier's status carries the run's windows: a window failing a correlation
     test in a run that fails no more often than a correct model (1 in 20) is 'fail' by

@@ -65,8 +65,9 @@ def fraction(value: Any) -> str:
 
 
 def _table(title: str) -> Table:
+    """A table at least as wide as its title (a narrower one wraps the title mid-phrase)."""
     return Table(title=title, title_justify="left", title_style="bold", box=box.SIMPLE_HEAD,
-                 pad_edge=False, show_edge=False)
+                 pad_edge=False, show_edge=False, min_width=len(title))
 
 
 def seconds(value: Any) -> str:
