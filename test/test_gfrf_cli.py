@@ -74,6 +74,21 @@ def test_linear_model_says_h2_h3_zero(tmp_path: Path) -> None:
     assert d["eval"][0]["h"] == [0.0, 0.0]
 
 
+def test_a_constant_term_is_a_note_not_a_warning(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """identify fits a constant term by default: that it does not enter the GFRFs is said
+    as a note, so an analysis of a default model carries no warning for it."""
+    rc, d = run_cli(tmp_path, resonant(extra={"const": 0.3, "u(k-1)^2": 0.1}))
+    assert rc == 0 and d is not None
+    assert d["warnings"] == []
+    assert d["notes"] == ["the constant term does not enter the GFRFs (it shifts the "
+                          "operating point)"]
+    out = capsys.readouterr().out
+    assert "note: the constant term" in out and "warning" not in out
+    rc, d = run_cli(tmp_path, resonant())
+    assert rc == 0 and d is not None and d["notes"] == []
+
+
 def test_unstable_model_reported_and_computed(tmp_path: Path, capsys: pytest.CaptureFixture[str]
                                               ) -> None:
     model = {"sample_rate_hz": 500.0,

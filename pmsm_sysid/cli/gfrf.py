@@ -105,6 +105,8 @@ def _print(res: dict[str, Any], out: TextIO) -> None:
           "sampling)", file=out)
     for w in res["warnings"]:
         print(f"warning: {w}", file=out)
+    for n in res.get("notes", []):
+        print(f"note: {n}", file=out)
     print(f"identifiability: {res['identifiability']['rests_on']}", file=out)
 
     def mark(row: dict[str, Any]) -> str:

@@ -96,7 +96,7 @@ def gfrf_facts(g: Mapping[str, Any]) -> Facts:
 
 def tables(g: Mapping[str, Any]) -> list[Block]:
     blocks: list[Block] = [gfrf_facts(g)]
-    blocks += [Note(str(w)) for w in g.get("warnings", [])]
+    blocks += [Note(str(w)) for w in (*g.get("warnings", []), *g.get("notes", []))]
     blocks.append(peak_table(g))
     for order in ("h2", "h3"):
         if g[order].get("ridges"):

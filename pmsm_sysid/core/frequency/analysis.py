@@ -48,6 +48,7 @@ class GfrfAnalysis:
     evals: tuple[dict[str, Any], ...] = ()
     grid: dict[str, Any] | None = None
     warnings: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
     model_info: dict[str, Any] = field(default_factory=dict)
     timing_ms: dict[str, float] = field(default_factory=dict)
 
@@ -59,6 +60,7 @@ class GfrfAnalysis:
             "poles": [list(p) for p in self.poles],
             "max_pole_radius": radius,
             "warnings": list(self.warnings),
+            "notes": list(self.notes),
             "model": dict(self.model_info),
             "h1": {"peaks": list(self.peaks)},
             "h2": dict(self.h2),
@@ -175,14 +177,20 @@ def _warnings(g: Gfrf, stable: bool, model: NarxModel, ex: ExcitationSummary | N
         r = float(np.max(np.abs(g.poles())))
         out.append(f"linear part is unstable (largest pole radius {r:.4f} >= 1): the GFRFs "
                    "are computed but describe no steady state; the model's free run diverges")
-    if any(t.is_constant for t in model.terms):
-        out.append("the constant term does not enter the GFRFs (it shifts the operating point)")
     if g.is_linear:
         out.append("model has no nonlinear terms: H2 = H3 = 0")
     if ex is not None and not ex.broadband:
         out.append("estimation input: " + ex.describe() + "; peaks and ridges at "
                    "or between the tones rest on the excitation, not on the plant")
     return out
+
+
+def _notes(model: NarxModel) -> list[str]:
+    """What a reader needs to know that is no fault of the model (identify's models hold a
+    constant term by default: a warning about it would be on every default analysis)."""
+    if any(t.is_constant for t in model.terms):
+        return ["the constant term does not enter the GFRFs (it shifts the operating point)"]
+    return []
 
 
 def analyse(model: NarxModel, excitation: ExcitationSummary | None = None,
@@ -216,7 +224,7 @@ def analyse(model: NarxModel, excitation: ExcitationSummary | None = None,
         if 3 in orders else {"ridges": [], "skipped": True},
         identifiability=identifiability_block(excitation),
         evals=evals, grid=grid_out,
-        warnings=tuple(_warnings(g, stable, model, excitation)),
+        warnings=tuple(_warnings(g, stable, model, excitation)), notes=tuple(_notes(model)),
         model_info={"input": model.input_name, "output": model.output_name,
                     "n_terms": len(model.terms),
                     "nonlinear_terms": [t.name for t in model.terms if t.degree > 1],
