@@ -17,6 +17,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from .clocktext import stamp_text
 from .topics import DIAGNOSIS_PARAMS
 
 #: effect -> (param, unit) published per diagnosis; the first is the headline number
@@ -125,7 +126,8 @@ def line(d: Mapping[str, Any]) -> str:
     before, after = held_out_nrmse(d)
     fit = (f"; held-out force NRMSE {before:.3g} -> {after:.3g}" if effects(d)
            else f"; held-out force NRMSE {before:.3g}")
-    return (f"diagnosis of {span:.3g} s ending at t={_float(w.get('end_stamp')):.1f} s: "
+    end = stamp_text(_float(w.get("end_stamp")), prefix="t=")
+    return (f"diagnosis of {span:.3g} s ending at {end}: "
             f"{found_text(d)}{fit}")
 
 

@@ -148,6 +148,17 @@ def test_fit_errors_warnings_and_changes_are_named() -> None:
                            "validation pass")
 
 
+def test_wall_clock_stamps_read_as_a_time_of_day() -> None:
+    """A wall-clock run's stamps count from 1970: a change event at one reads as its UTC
+    time of day, not as 1795787670.04 s; a simulated clock's as seconds."""
+    s = _summary()
+    s["change_events"] = [{"output": "speed", "window": {"end_stamp": 1795787670.04},
+                           "reasons": ["h1_gain_db"]}]
+    assert "1 change event(s): speed at 13:54:30.0 UTC (h1_gain_db)" in headline(s)
+    s["change_events"][0]["window"]["end_stamp"] = 8.5
+    assert "1 change event(s): speed at 8.50 s (h1_gain_db)" in headline(s)
+
+
 def test_no_identifier_here_has_no_verdict_and_no_model_yet_is_a_warning() -> None:
     s = _summary()
     s.update(last_models={}, last_model=None, last_validations={}, samples_received=None)

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from ..clocktext import stamp_text
 from ..core.validation.windows import DEFAULT_SHIFT, LEVEL, NULL_RATE, window_rate
 
 __all__ = ["LEVEL", "NULL_RATE", "headline", "verdict", "window_rate", "window_shift"]
@@ -142,7 +143,7 @@ def verdict(s: dict[str, Any]) -> dict[str, Any]:
         failures.append(f"{len(errors)} fit error(s), last: {errors[-1]}")
     changes = s.get("change_events") or []
     if changes:
-        where = ", ".join(f"{c['output']} at {c['window']['end_stamp']:.2f} s "
+        where = ", ".join(f"{c['output']} at {stamp_text(c['window']['end_stamp'], 2)} "
                           f"({', '.join(c['reasons'])})" for c in changes[-3:])
         last = "the last 3: " if len(changes) > 3 else ""
         warnings.append(f"{len(changes)} change event(s): {last}{where}")
@@ -179,7 +180,8 @@ def diagnosis_warnings(s: dict[str, Any]) -> list[str]:
     if last and mismatch(last):
         lacks = "the simulation" if last.get("reference") == "sim_recording" else "the plant"
         end = (last.get("window") or {}).get("end_stamp")
-        where = f" (span ending at t={end:.1f} s)" if end is not None else ""
+        where = (f" (span ending at {stamp_text(float(end), prefix='t=')})"
+                 if end is not None else "")
         out.append(f"missing from {lacks}{where}: {found_text(last)}")
     if s.get("diagnoses_skipped"):
         out.append(f"{s['diagnoses_skipped']} span(s) not diagnosed (skipped: diagnoses "

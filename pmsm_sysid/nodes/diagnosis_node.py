@@ -43,6 +43,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
 from .. import diagnosed
+from ..clocktext import stamp_text
 from ..core.errors import DataError
 from ..core.frequency.analysis import json_safe
 from ..core.online.engine import EngineConfig, OnlineEngine, WindowError
@@ -242,7 +243,7 @@ class DiagnosisNode(Node):
                 self._publish(r)
 
     def _failed(self, r: WindowError) -> None:
-        text = f"span ending at t={r.end_stamp:.1f} s: {r.error}"
+        text = f"span ending at {stamp_text(r.end_stamp, prefix='t=')}: {r.error}"
         self.errors.append(text)
         self.last_failed = text
         self.get_logger().warning(f"not diagnosed: {text}")  # type: ignore[no-untyped-call]

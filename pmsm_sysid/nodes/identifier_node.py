@@ -41,6 +41,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from ..bagio.cdr import decode_stamped
+from ..clocktext import stamp_text
 from ..core.errors import DataError
 from ..core.frequency.analysis import json_safe
 from ..core.online.engine import EngineConfig, OnlineEngine, WindowError
@@ -407,7 +408,7 @@ class IdentifierNode(Node):
             del self.last["changes"][:-100]
             for c in r.changes:
                 self.get_logger().warning(  # type: ignore[no-untyped-call]
-                    f"plant change on {c['output']} at {c['window']['end_stamp']:.3f} s: "
+                    f"plant change on {c['output']} at {stamp_text(c['window']['end_stamp'], 3)}: "
                     f"{c['reasons']}")
 
     # ------------------------------------------------------------------ summary
