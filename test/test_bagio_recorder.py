@@ -191,6 +191,22 @@ def test_killed_mcap_is_refused_then_salvaged(tmp_path: Path) -> None:
     assert (bag / "killed_mcap.mcap.damaged").is_file()
 
 
+def test_repair_that_salvages_nothing_says_so(tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """A bag cut before its first complete chunk: the repair recovers no message, and says
+    so in one line with exit 2 instead of reporting a repair of 0 messages."""
+    n = 100
+    t = np.arange(n) / 500.0
+    write_recording(tmp_path / "b", Recording(t=t, thrust=t, speed=-t, position=2 * t,
+                                              sample_rate_hz=500.0), storage="mcap")
+    data = next((tmp_path / "b").glob("*.mcap"))
+    with data.open("r+b") as f:
+        f.truncate(data.stat().st_size // 2)
+    assert repair_main(["repair", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no message could be salvaged" in err, err
+
+
 def test_repair_rebuilds_lost_metadata(tmp_path: Path) -> None:
     from pmsm_sysid.bagio import repair
 

@@ -22,6 +22,10 @@ def main(argv: list[str] | None = None) -> int:
     except PmsmSysidError as exc:
         print(f"repair: error: {exc}", file=sys.stderr)
         return 2
+    if n == 0:  # readable now, but empty: nothing of the recording came back
+        print(f"repair: error: {args.bag}: no message could be salvaged (none of it was "
+              "written completely)", file=sys.stderr)
+        return 2
     print(f"{args.bag}: repaired, {n} messages")
     return 0
 
