@@ -45,8 +45,11 @@ from .result import Curves, DiagnoseResult
 from .rival import as_found, cap_beside_curves, rivals
 from .showfit import beside_curves, fit_table, replay_notes, scan_unexplained, where_table
 
-_CLOSED_NOTE = ("the thrust responds to sensor noise (closed loop): thrust_lag and "
-                "transport_delay were not searched -- the thrust's own noise would fake them")
+# the feedback test cannot tell a loop from an open-loop thrust reading's own noise under a
+# band-limited input (docs/diagnose.md, step 4): the note names both; either would fake a lag
+_CLOSED_NOTE = ("the thrust moves with the measurements' noise (a closed loop, or noise on "
+                "the thrust reading: the two look alike): thrust_lag and transport_delay were "
+                "not searched -- that noise would fake them")
 
 
 @dataclass(frozen=True)
