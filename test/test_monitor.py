@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -182,16 +183,23 @@ def test_view_fits_80_columns_plainly() -> None:
     assert max(len(line) for line in wide.splitlines()) <= 120
 
 
+def _speed_status(ee: float, outside: int, r2: str, run: list[int]) -> dict[str, Any]:
+    """An identifier's speed validation status as the monitor receives it: the ee test's
+    largest correlation (band 0.062, 4 of 20 lags allowed outside) and the run's count."""
+    corr = json.dumps({"max_abs": ee, "band": 0.062, "pass": ee <= 0.062, "n_outside": outside,
+                       "n_lags": 20, "n_allowed": 4})
+    values = {"r2": r2, "min_r2": "0.9", "diverged": "false", "corr.ee": corr,
+              "windows_passed": str(run[0]), "windows_validated": str(run[1]),
+              "run_consistent": "true"}
+    return {"name": "identifier/cross_validation/speed", "level": 0 if ee <= 0.062 else 1,
+            "message": f"window {'pass' if ee <= 0.062 else 'fail'}", "values": values}
+
+
 def test_the_validation_title_is_one_line_above_a_narrow_table() -> None:
     """Passing windows make a narrow table; it is as wide as its title, which stays whole
     on a 100-column terminal (it wrapped mid-phrase)."""
     v = SysIdView()
-    corr = json.dumps({"max_abs": 0.05, "band": 0.062, "pass": True, "n_outside": 0,
-                       "n_lags": 20, "n_allowed": 4})
-    values = {"r2": "0.997", "min_r2": "0.9", "diverged": "false", "corr.ee": corr,
-              "windows_passed": "27", "windows_validated": "27", "run_consistent": "true"}
-    v.on_validation([{"name": "identifier/cross_validation/speed", "level": 0,
-                      "message": "window pass", "values": values}])
+    v.on_validation([_speed_status(0.05, 0, "0.997", [27, 27])])
     lines = [ln.rstrip() for ln in render(_snap(v), 1.0, width=100).splitlines()]
     assert "validation (run: windows passed; a correct model fails 1 in 20)" in lines, lines
 
@@ -202,12 +210,9 @@ def test_a_failed_window_of_a_run_that_passes_reads_as_chance() -> None:
     chance with the run's count beside it, not a red FAIL; in a run that fails too often it
     is FAIL with what to try. Rows say which check they are (next window, own window)."""
     v = SysIdView()
-    corr = json.dumps({"max_abs": 0.116, "band": 0.062, "pass": False, "n_outside": 5,
-                       "n_lags": 20, "n_allowed": 4})
-    values = {"r2": "0.996", "min_r2": "0.9", "diverged": "false", "corr.ee": corr,
-              "windows_passed": "50", "windows_validated": "52", "run_consistent": "true"}
-    v.on_validation([{"name": "identifier/cross_validation/speed", "level": 1,
-                      "message": "window fail", "values": values},
+    status = _speed_status(0.116, 5, "0.996", [50, 52])
+    values = status["values"]
+    v.on_validation([status,
                      {"name": "gfrf/validation/speed", "level": 1, "message": "warn",
                       "values": {"corr.ee.max_abs": "0.116", "corr.ee.band": "0.062",
                                  "corr.ee.pass": "false", "stable": "true"}}])
