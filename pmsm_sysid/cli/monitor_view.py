@@ -18,7 +18,6 @@ import json
 import math
 import os
 from collections.abc import Mapping
-from datetime import UTC, datetime
 from typing import Any
 
 from rich import box
@@ -26,6 +25,7 @@ from rich.console import Group, RenderableType
 from rich.table import Table
 from rich.text import Text
 
+from ..clocktext import is_wall_clock, time_of_day
 from ..core.online.history import CHANGE_NAMES
 
 UNITS = {"thrust": "N", "speed": "m/s", "position": "m"}
@@ -83,9 +83,7 @@ def clock(stamp_s: Any) -> str:
     if stamp_s is None:
         return "-"
     s = float(stamp_s)
-    if s > 1e9:
-        return datetime.fromtimestamp(s, UTC).strftime("%H:%M:%S")
-    return f"t={s:.1f} s"
+    return time_of_day(s, tenths=False) if is_wall_clock(s) else f"t={s:.1f} s"
 
 
 def _short_topic(topic: str, namespace: str) -> str:

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import plots
+from ..clocktext import is_wall_clock, time_of_day
 from ..core.errors import DataError
 from ..core.recording.signals import Recording
 from ..core.terms.model import NarxModel
@@ -81,11 +82,7 @@ def term_table(d: Mapping[str, Any]) -> Table:
 
 def _stamp(t: float) -> str:
     """A window stamp: UTC clock time for wall-clock stamps, seconds for a simulated clock."""
-    if t > 1e9:
-        from datetime import UTC, datetime
-
-        return datetime.fromtimestamp(round(t, 1), UTC).strftime("%H:%M:%S.%f")[:-5]
-    return f"{t:.2f} s"
+    return time_of_day(t) if is_wall_clock(t) else f"{t:.2f} s"
 
 
 def _live_window(w: Mapping[str, Any]) -> str:
@@ -96,7 +93,7 @@ def _live_window(w: Mapping[str, Any]) -> str:
     a, b = w.get("start_stamp"), w.get("end_stamp")
     if a is None or b is None:
         return where
-    utc = " UTC" if float(a) > 1e9 else ""
+    utc = " UTC" if is_wall_clock(float(a)) else ""
     return f"{where}, {_stamp(float(a))} to {_stamp(float(b))}{utc}"
 
 
