@@ -29,20 +29,9 @@ import math
 from typing import Any
 
 from ..clocktext import stamp_text
-from ..core.validation.windows import DEFAULT_SHIFT, LEVEL, NULL_RATE, window_rate
+from ..core.validation.windows import LEVEL, NULL_RATE, grid_shift, window_rate
 
-__all__ = ["LEVEL", "NULL_RATE", "headline", "verdict", "window_rate", "window_shift"]
-
-
-def window_shift(s: dict[str, Any]) -> float:
-    """The hop over the window of the run summary ``s``'s identifier (its
-    ``window_grid``), or the identifier's defaults' (a summary without it)."""
-    grid = s.get("window_grid") or {}
-    try:
-        shift = float(grid["hop"]) / float(grid["window"])
-    except (KeyError, TypeError, ValueError, ZeroDivisionError):
-        return DEFAULT_SHIFT
-    return shift if shift > 0 else DEFAULT_SHIFT
+__all__ = ["LEVEL", "NULL_RATE", "headline", "verdict", "window_rate"]
 
 
 def _failure(v: dict[str, Any]) -> str:
@@ -127,7 +116,7 @@ def verdict(s: dict[str, Any]) -> dict[str, Any]:
     warnings: list[str] = []
     outputs: list[str] = []
     windows: dict[str, Any] = {}
-    shift = window_shift(s)
+    shift = grid_shift(s.get("window_grid"))
     for name in names:
         status, text = _judge_output(name, vals.get(name), counts.get(name), shift)
         outputs.append(text)

@@ -67,8 +67,10 @@ def validation_statuses(validations: Sequence[dict[str, Any]],
                         grid: dict[str, int]) -> list[DiagnosticStatus]:
     """One window's validations, each with its output's change decision and run count
     (``grid``: the identifier's window and hop)."""
+    from ..core.validation.windows import grid_shift
+
     score = {d["output"]: d for d in decisions}  # the change detector, per output
-    shift = grid["hop"] / grid["window"]
+    shift = grid_shift(grid)
     return [validation_status(v, score.get(v["output"]), threshold, counts.get(v["output"]),
                               shift) for v in validations]
 

@@ -37,8 +37,7 @@ def verdict_facts(d: Mapping[str, Any]) -> list[tuple[str, str]]:
     """The run's verdict and, per output, its windows judged together: as many failures
     as a correct model has (1 in 20 by chance), or more (a binomial test at 1 %, widened for
     the windows' overlap)."""
-    from ..cli.run_verdict import window_shift
-    from ..core.validation.windows import window_rate
+    from ..core.validation.windows import grid_shift, window_rate
 
     out: list[tuple[str, str]] = []
     v = d.get("verdict") or {}
@@ -46,7 +45,7 @@ def verdict_facts(d: Mapping[str, Any]) -> list[tuple[str, str]]:
         named = [*v.get("failures", []), *v.get("warnings", [])]
         out.append(("verdict", v["status"] + (f": {'; '.join(named)}" if named else "")))
     for output, count in (d.get("validation_counts") or {}).items():
-        r = window_rate(count[0], count[1], shift=window_shift(dict(d)))
+        r = window_rate(count[0], count[1], shift=grid_shift(d.get("window_grid")))
         judged = ("consistent with a correct model, which fails 1 in 20 by chance"
                   if r["consistent"] else "more than chance explains (a correct model fails "
                   "1 in 20)")

@@ -32,6 +32,7 @@ the test said FAIL for 3 of 399 10 s runs at the default hop and for 4 of 399 at
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -42,7 +43,7 @@ import numpy as np
 from scipy import special
 
 __all__ = ["DEFAULT_SHIFT", "LEVEL", "NULL_RATE", "OUTCOME_CORRELATION", "dispersion",
-           "window_rate"]
+           "grid_shift", "window_rate"]
 
 #: Share of windows whose cross-validation a correct model may fail (module doc).
 NULL_RATE = 0.05
@@ -57,6 +58,18 @@ OUTCOME_CORRELATION = (
     (0.3, 0.10), (0.4, 0.07), (0.5, 0.06), (0.6, 0.045), (0.75, 0.045), (1.0, 0.03),
     (1.25, 0.03), (1.5, 0.02), (1.6, 0.0))
 _SHIFTS, _RHO = (np.array(c, dtype=np.float64) for c in zip(*OUTCOME_CORRELATION, strict=True))
+
+
+def grid_shift(grid: Mapping[str, Any] | None) -> float:
+    """The hop over the window of an identifier's window grid (``{"window": ..., "hop":
+    ...}``, as the run summary's ``window_grid``), or :data:`DEFAULT_SHIFT` without one."""
+    if grid is None:
+        return DEFAULT_SHIFT
+    try:
+        shift = float(grid["hop"]) / float(grid["window"])
+    except (KeyError, TypeError, ValueError, ZeroDivisionError):
+        return DEFAULT_SHIFT
+    return shift if shift > 0 else DEFAULT_SHIFT
 
 
 def dispersion(made: int, shift: float = DEFAULT_SHIFT) -> float:
