@@ -156,11 +156,7 @@ def phi(rho: dict[float, float | None], n: int, s: float) -> float | None:
     """Dispersion of the failed count of ``n`` windows ``s`` windows apart whose outcomes
     correlate by ``rho`` (linear between its shifts, 0 beyond the last)."""
     known = [(d, r) for d, r in sorted(rho.items()) if r is not None]
-    if not known:
-        return None
-    d, r = (np.array(v) for v in zip(*known, strict=True))
-    k = np.arange(1, n)
-    return float(1 + 2 / n * np.sum((n - k) * np.interp(k * s, d, r, right=0.0)))
+    return verdict_dispersion(n, s, table=known) if known else None
 
 
 def _output(grids: list[Rows], params: dict[str, Any], hop_s: float,

@@ -32,7 +32,7 @@ the test said FAIL for 3 of 399 10 s runs at the default hop and for 4 of 399 at
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -72,17 +72,22 @@ def grid_shift(grid: Mapping[str, Any] | None) -> float:
     return shift if shift > 0 else DEFAULT_SHIFT
 
 
-def dispersion(made: int, shift: float = DEFAULT_SHIFT) -> float:
+def dispersion(made: int, shift: float = DEFAULT_SHIFT,
+               table: Sequence[tuple[float, float]] | None = None) -> float:
     """phi(made, shift) of the module doc: the variance of a run's failed-window count over
-    the binomial variance, for ``made`` windows ``shift`` windows apart (hop / window).
+    the binomial variance, for ``made`` windows ``shift`` windows apart (hop / window), with
+    rho from ``table`` ((shift, rho) pairs in increasing shift; default
+    :data:`OUTCOME_CORRELATION`).
 
     >>> round(dispersion(12), 2), dispersion(12, shift=2.0)
     (1.46, 1.0)
     """
     if not shift > 0:
         raise ValueError(f"shift must be > 0 windows (hop / window), got {shift}")
+    shifts, rhos = (_SHIFTS, _RHO) if table is None else (
+        np.array(c, dtype=np.float64) for c in zip(*table, strict=True))
     k = np.arange(1, made, dtype=np.float64)
-    rho = np.interp(k * shift, _SHIFTS, _RHO, right=0.0)
+    rho = np.interp(k * shift, shifts, rhos, right=0.0)
     return 1.0 + 2.0 * float(np.sum((made - k) * rho)) / made if made > 1 else 1.0
 
 
