@@ -444,8 +444,9 @@ def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_thresh
 @pytest.mark.timeout(1800)
 def test_a_local_cluster_starts_no_more_workers_than_recordings_to_analyse(
         five_recordings: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """A worker started for nothing costs its start: two recordings left (of five, three
-    already in the table) on ``--workers 4`` start two."""
+    """A worker started for nothing costs its start: one recording to analyse starts no
+    cluster (it is analysed in the calling process), two left (of three, one already in the
+    table) on one worker start one, two left (of five) on ``--workers 4`` start two."""
     import pmsm_sysid.batch.cluster as cluster
 
     asked: list[int] = []
@@ -457,8 +458,14 @@ def test_a_local_cluster_starts_no_more_workers_than_recordings_to_analyse(
 
     monkeypatch.setattr(cluster, "local_cluster", counted)
     out = tmp_path / "out"
-    ps.fleet([str(p) for p in five_recordings[:3]], plant=str(NOMINAL), out=out, workers=1)
+    one = ps.fleet([str(five_recordings[0])], plant=str(NOMINAL), out=out, workers=2)
+    assert asked == []
+    row = one.table.to_pylist()[0]
+    assert row["status"] == "ok" and row["mass_kg"] == pytest.approx(2.3213, rel=0.05)
+    assert "coulomb_friction" in row["effects"]
+    ps.fleet([str(p) for p in five_recordings[:3]], plant=str(NOMINAL), out=out, workers=1,
+             resume=True)
     got = ps.fleet([str(p) for p in five_recordings], plant=str(NOMINAL), out=out,
                    workers=4, resume=True)
     assert asked == [1, 2]
-    assert got.table.num_rows == 5
+    assert got.table.num_rows == 5 and got.table.column("status").to_pylist() == ["ok"] * 5

@@ -46,7 +46,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=count(1, 1024), default=None, metavar="N",
                        help="worker processes of the local Dask cluster (default: one per "
-                            "CPU; never more than recordings to analyse)")
+                            "CPU; never more than recordings to analyse; a single one is "
+                            "analysed in this process, without a cluster)")
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                        help="run on an existing Dask cluster (dask scheduler / dask worker)")
     p.add_argument("--connect-timeout", type=number(0, None, low_open=True, unit="s"),
