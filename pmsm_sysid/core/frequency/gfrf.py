@@ -17,8 +17,9 @@ and symmetrised by Eq. 9, H_n^sym = (1/n!) sum over the n! permutations of H_n^a
 Frequencies are normalised, in cycles/sample (f = f_Hz / sample rate, |f| <= 0.5).
 Arguments are numpy arrays that broadcast together, so a grid costs only what its shape
 needs: ``h2(f[:, None], f[None, :])`` evaluates H1 on two vectors and the denominator on the
-grid. Sub-results are memoised by which arguments they depend on, so the n! permutations of
-Eq. 9 share their lower-order kernels and per-lag exponentials.
+grid. An exponential of a sum of arguments is formed as the product of per-argument powers
+(a multiply, not a complex exponential, per grid point), and the n! permutations of Eq. 9
+share their lower-order kernels, powers and denominator L_n.
 
 A constant term does not enter the GFRFs: it shifts the operating point (the GFRFs describe
 the response about it). Terms with y-lags or u-lags only are handled like any other term.
@@ -158,11 +159,12 @@ class Gfrf:
         shape = np.broadcast_shapes(*(x.shape for x in f))
         if not symmetric or len(f) == 1:
             return np.broadcast_to(ev.asym(labels), shape).astype(np.complex128)
-        perms = Counter(itertools.permutations(labels))
+        # Every ordering shares L_n (Eq. 7): sum the numerators, divide once.
         total = np.zeros(shape, dtype=np.complex128)
-        for perm, count in perms.items():
-            total += count * ev.asym(perm)
-        return np.asarray(total / math.factorial(len(f)), dtype=np.complex128)
+        for perm, count in Counter(itertools.permutations(labels)).items():
+            total += count * ev.num(perm)
+        return np.asarray(total / (ev.den(labels) * math.factorial(len(f))),
+                          dtype=np.complex128)
 
     def h1(self, f: ArrayLike) -> ComplexArray:
         return self.h(f)
@@ -202,46 +204,80 @@ def _check_grid(n: int, limit: int = MAX_GRID) -> int:
 
 
 class _Evaluator:
-    """One evaluation of Eqs. 7-8 on fixed argument arrays, memoised by argument indices."""
+    """One evaluation of Eqs. 7-8 on fixed argument arrays.
+
+    The exponential of a sum of arguments is the product of per-argument powers,
+    e^{-j2pi(f_a+f_b)l} = z_a^l z_b^l with z_i = e^{-j2pi f_i}: on a grid spanned by a column and
+    a row that is one multiply per point instead of a complex exponential. Kept for the whole
+    evaluation: the powers, the lower-order kernels H_m^asym and the denominators L_m (shared
+    by all orderings of the same arguments). Products over several arguments and H_{n,p} are
+    formed again where used, as a fresh grid-sized array costs more than the multiply.
+    """
 
     def __init__(self, g: Gfrf, f: list[FloatArray]) -> None:
         self.g = g
         self.f = f
-        self._sum: dict[_Key, FloatArray] = {}
-        self._exp: dict[tuple[_Key, int], ComplexArray] = {}
+        self._pow: dict[tuple[int, int], ComplexArray] = {}
         self._asym: dict[_Key, ComplexArray] = {}
-        self._hnp: dict[tuple[_Key, tuple[int, ...]], ComplexArray] = {}
+        self._den: dict[_Key, ComplexArray] = {}
+        self._groups: dict[_Key, list[tuple[int, int]]] = {}
 
-    def fsum(self, idx: _Key) -> FloatArray:
+    def power(self, i: int, lag: int) -> ComplexArray:
+        """z_i^lag = e^{-j 2 pi f_i lag} from z_i by halving the lag (z^l = z^h z^(l-h),
+        h = l // 2), cached. Its rounding error grows in proportion to the lag, as that of
+        e^{-j 2 pi f l} evaluated directly does (through the rounding of f l)."""
+        key = (i, lag)
+        if key not in self._pow:
+            if lag <= 1:
+                self._pow[key] = np.exp(-_TWO_PI_J * lag * self.f[i])
+            else:
+                half = lag // 2
+                self._pow[key] = self.power(i, half) * self.power(i, lag - half)
+        return self._pow[key]
+
+    def exp(self, idx: _Key, lag: int, coef: float = 1.0) -> ComplexArray:
+        """coef e^{-j 2 pi (sum of the indexed frequencies) lag}: the product of the arguments'
+        powers (a repeated argument as one power), smallest first."""
         key = tuple(sorted(idx))
-        if key not in self._sum:
-            self._sum[key] = np.asarray(sum((self.f[i] for i in key), start=np.float64(0.0)))
-        return self._sum[key]
+        if key not in self._groups:
+            count = Counter(key)
+            self._groups[key] = sorted(count.items(), key=lambda ik: self.f[ik[0]].size)
+        return _prod([coef, *(self.power(i, k * lag) for i, k in self._groups[key])])
 
-    def exp(self, idx: _Key, lag: int) -> ComplexArray:
-        """Per-lag exponential e^{-j 2 pi (sum of the indexed frequencies) lag}, cached."""
-        key = (tuple(sorted(idx)), lag)
-        if key not in self._exp:
-            self._exp[key] = np.exp(-_TWO_PI_J * lag * self.fsum(idx))
-        return self._exp[key]
+    def shape(self, idx: _Key) -> tuple[int, ...]:
+        return np.broadcast_shapes(*(self.f[i].shape for i in idx))
 
     def _poly(self, c: FloatArray, idx: _Key) -> ComplexArray:
-        """sum_l c[l] e^{-j 2 pi f l} at f = sum of the indexed frequencies (Horner in z)."""
+        """sum_l c[l] e^{-j 2 pi f l} at f = sum of the indexed frequencies: term by term over
+        the nonzero c[l] when they are sparse, else by Horner in z = e^{-j 2 pi f}."""
+        acc = np.zeros(self.shape(idx), dtype=np.complex128)
         nz = np.flatnonzero(c)
-        if len(nz) == 0:
-            return np.zeros(np.shape(self.fsum(idx)), dtype=np.complex128)
-        if len(nz) * 3 < len(c):  # sparse: direct per-lag exponentials
-            return np.asarray(sum(c[k] * self.exp(idx, int(k)) for k in nz), dtype=np.complex128)
+        if len(nz) * 3 < len(c):
+            for k in nz:
+                acc += self.exp(idx, int(k), float(c[k]))
+            return acc
         z = self.exp(idx, 1)
-        acc = np.full(np.shape(z), c[-1], dtype=np.complex128)
+        acc += c[-1]
         for coef in c[-2::-1]:
-            acc = acc * z + coef
+            acc *= z
+            acc += coef
         return acc
 
+    def den(self, idx: _Key) -> ComplexArray:
+        """L_m of Eq. 7 at the sum of the indexed frequencies (the same for every ordering)."""
+        key = tuple(sorted(idx))
+        if key not in self._den:
+            self._den[key] = 1.0 - self._poly(self.g.a, key)
+        return self._den[key]
+
     def asym(self, idx: _Key) -> ComplexArray:
-        """H_m^asym over the arguments idx (Eq. 7), m = len(idx)."""
-        if idx in self._asym:
-            return self._asym[idx]
+        """H_m^asym over the arguments idx (Eq. 7), m = len(idx), cached."""
+        if idx not in self._asym:
+            self._asym[idx] = np.asarray(self.num(idx) / self.den(idx), dtype=np.complex128)
+        return self._asym[idx]
+
+    def num(self, idx: _Key) -> Any:
+        """The right-hand side of Eq. 7 over the arguments idx (0.0 when no term enters)."""
         m = len(idx)
         num: Any = self._poly(self.g.b, idx) if m == 1 else 0.0
         for t in self.g.nonlinear:
@@ -249,34 +285,29 @@ class _Evaluator:
             if p + q > m or (p == 0 and q != m):
                 continue
             if p == 0:  # c_{0,n}: pure input term
-                num = num + t.coef * _prod(self.exp((i,), lag) for i, lag in zip(idx, t.u_lags,
-                                                                                  strict=True))
+                num = num + self._inputs(idx, t.u_lags, t.coef)
             elif q == 0:  # c_{p,0}, p >= 2
                 num = num + t.coef * self.hnp(idx, t.y_lags)
             else:  # c_{p,q} cross term: inputs take the last q arguments
-                tail = idx[m - q:]
-                ue = _prod(self.exp((i,), lag) for i, lag in zip(tail, t.u_lags, strict=True))
-                num = num + t.coef * ue * self.hnp(idx[:m - q], t.y_lags)
-        den = 1.0 - self._poly(self.g.a, idx)
-        res = np.asarray(num / den, dtype=np.complex128)
-        self._asym[idx] = res
-        return res
+                ue = self._inputs(idx[m - q:], t.u_lags, t.coef)
+                num = num + ue * self.hnp(idx[:m - q], t.y_lags)
+        return num
+
+    def _inputs(self, idx: _Key, u_lags: tuple[int, ...], coef: float) -> ComplexArray:
+        """coef e^{-j 2 pi (f_1 m_1 + ... + f_q m_q)} over the arguments idx, smallest first."""
+        factors = sorted((self.power(i, lag) for i, lag in zip(idx, u_lags, strict=True)),
+                         key=np.size)
+        return _prod([coef, *factors])
 
     def hnp(self, idx: _Key, y_lags: tuple[int, ...]) -> ComplexArray:
         """H_{n,p} of Eq. 8 over the arguments idx for output lags (l_1..l_p)."""
-        key = (idx, y_lags)
-        if key in self._hnp:
-            return self._hnp[key]
         n, p = len(idx), len(y_lags)
         if p == 1:
-            res = self.asym(idx) * self.exp(idx, y_lags[0])
-        else:
-            res = np.asarray(sum(
-                self.asym(idx[:i]) * self.hnp(idx[i:], y_lags[:-1])
-                * self.exp(idx[:i], y_lags[-1]) for i in range(1, n - p + 2)),
-                dtype=np.complex128)
-        self._hnp[key] = res
-        return res
+            return self.asym(idx) * self.exp(idx, y_lags[0])
+        return np.asarray(sum(
+            self.asym(idx[:i]) * self.exp(idx[:i], y_lags[-1])
+            * self.hnp(idx[i:], y_lags[:-1]) for i in range(1, n - p + 2)),
+            dtype=np.complex128)
 
 
 def _prod(items: Any) -> ComplexArray:
