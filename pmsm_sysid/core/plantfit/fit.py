@@ -201,7 +201,8 @@ def fit_effects(plant: Plant, segs: Segments, opts: FitOptions | None = None) ->
     cands = Candidates.build(segs.est, exclude=("thrust_lag",) if segs.closed_loop else ())
     n_tests = sum(f.n_independent for f in cands.families)
     ranking = score_step(segs.est, cands, [], opts.alpha, opts.min_share)
-    steps, _ = forward_select(segs.est, cands, opts.alpha, opts.min_share, opts.max_effects)
+    steps, _ = forward_select(segs.est, cands, opts.alpha, opts.min_share, opts.max_effects,
+                              first=ranking)
     chosen = settle_friction(tuple(s.effect for s in steps), segs.est, n_tests, opts.alpha,
                              opts.min_share)
     model, held, dropped = confirmed_model(chosen, segs.est, segs.val, opts.alpha,

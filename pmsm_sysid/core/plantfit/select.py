@@ -148,12 +148,16 @@ def score_step(data: EquationData, cands: Candidates, chosen: list[Effect], alph
 
 def forward_select(data: EquationData, cands: Candidates, alpha: float = ALPHA,
                    min_share: float = MIN_SHARE, max_effects: int = MAX_EFFECTS,
-                   ) -> tuple[list[Step], list[Step]]:
-    """Accepted steps in order, and the scores of the refused candidates at the last step."""
+                   first: list[Step] | None = None) -> tuple[list[Step], list[Step]]:
+    """Accepted steps in order, and the scores of the refused candidates at the last step.
+
+    ``first``: :func:`score_step` of ``data`` with nothing chosen, when the caller has it
+    (the ranking): the first step is taken from it instead of being scored again."""
     chosen: list[Effect] = []
     steps: list[Step] = []
     while len(chosen) < min(max_effects, len(cands.families)):
-        scored = score_step(data, cands, chosen, alpha, min_share)
+        scored = first if first is not None and not chosen \
+            else score_step(data, cands, chosen, alpha, min_share)
         passing = [s for s in scored if s.accepted]
         if not passing:
             return steps, scored
