@@ -19,10 +19,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from ..plantfit.kinematics import EquationData, thinned, thinned_sizes, thinned_times
-from ..plantfit.stats import lstsq, nested_f_test
+from ..plantfit.stats import f_logsf, lstsq, nested_f_test
 
 FloatArray = NDArray[np.float64]
 
@@ -212,7 +211,7 @@ def scan_axes(data: EquationData, y: FloatArray, base: FloatArray,
     cols = _sincos(t - t[0], f0)
     _, r1 = lstsq(np.hstack([base, cols]), y)
     dof1, dof2 = line_dof(max(1, len(sizes)))
-    logp = float(stats.f.logsf(ratio, dof1, dof2)) / math.log(10.0) if f0 > 0 else 0.0
+    logp = f_logsf(ratio, dof1, dof2) / math.log(10.0) if f0 > 0 else 0.0
     sig = max(0.0, -(logp + math.log10(len(bases) + REFINED * n_freq)))
     out.append(AxisFinding("frequency", float(r @ r - r1 @ r1) / yy, sig,
                            {"line_hz": f0, "line_power_share": line_share,

@@ -40,7 +40,7 @@ from .parts import equation_data_parts
 from .profile import Profile, profiles, settle_friction
 from .reading import reading_gap, reading_noise
 from .select import ALPHA, MAX_EFFECTS, MIN_SHARE, Candidates, Step, forward_select, score_step
-from .stats import HeldOutTest, ar_whitener, lstsq, whiten
+from .stats import HeldOutTest, ar_whitener, f_logsf, lstsq, whiten
 from .translate import corrected_plant, effect_params
 
 #: Share of a single recording used for estimation; the rest is held out.
@@ -218,8 +218,6 @@ def fit_effects(plant: Plant, segs: Segments, opts: FitOptions | None = None) ->
 
 def drop_one(fit: Fit, data: EquationData, n_tests: float) -> list[float]:
     """Significance (-log10 corrected p) of each effect given all the others."""
-    from scipy import stats
-
     X, fixed = design(fit.effects, data)
     poly = ar_whitener(data.y - fixed - X @ fit.beta)
     _, r1 = lstsq(whiten(poly, X), whiten(poly, data.y - fixed))  # GLS, like the reduced fits
@@ -232,7 +230,7 @@ def drop_one(fit: Fit, data: EquationData, n_tests: float) -> list[float]:
         _, r0 = lstsq(whiten(poly, Xr), whiten(poly, data.y - fr))
         q = max(1, fit.effects[k].width)
         f = max(0.0, (float(r0 @ r0) - sse1) / q) / (sse1 / dof)
-        out.append(capped(float(stats.f.logsf(f, q, dof)) / np.log(10.0)
+        out.append(capped(f_logsf(f, q, dof) / np.log(10.0)
                           + np.log10(max(n_tests, 1.0))))
     return out
 
