@@ -94,8 +94,32 @@ class Effect:
         return self.name
 
 
-def raw_columns(e: Effect, data: EquationData) -> FloatArray:
-    """Full-rate regressor columns of ``e`` (before parallel filtering), shape (N, width)."""
+#: The travel gain and the sin and cos of the phase of one harmonic of one pitch, by
+#: (pitch, harmonic): what a cogging column and a ripple column of that pitch both use.
+Phases = dict[tuple[float, int], tuple[FloatArray, FloatArray, FloatArray]]
+
+
+def _phase(data: EquationData, pitch_m: float, h: int,
+           kept: Phases | None) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Travel gain of harmonic ``h`` of ``pitch_m``, sin and cos of its phase ``h k x``
+    (``kept``: the ones computed already for the same data, filled as they are made)."""
+    got = None if kept is None else kept.get((pitch_m, h))
+    if got is None:
+        g = travel_gain(data.v, data.period, h / pitch_m, data.mode)
+        arg = h * (2.0 * math.pi / pitch_m) * data.x  # one phase for both, the same bits
+        got = (g, np.sin(arg), np.cos(arg))
+        if kept is not None:
+            kept[(pitch_m, h)] = got
+    return got
+
+
+def raw_columns(e: Effect, data: EquationData, kept: Phases | None = None) -> FloatArray:
+    """Full-rate regressor columns of ``e`` (before parallel filtering), shape (N, width).
+
+    ``kept``: the phases (:func:`_phase`) of ``data`` computed already: a ripple column of
+    a pitch is made from the cogging column's gain, sin and cos (measured: they were all
+    but a twentieth of a ripple column's cost, and the two families have the same pitches).
+    """
     x, _v = data.x, data.v
     if e.name == "force_offset":
         return np.ones((len(x), 1))
@@ -110,21 +134,18 @@ def raw_columns(e: Effect, data: EquationData) -> FloatArray:
     if e.name == "spring":
         return x[:, None]
     if e.name == "cogging":
-        k = 2.0 * math.pi / e.pitch_m
         out = np.empty((len(x), 2 * len(e.orders)))  # what column_stack of the pairs gives
         for i, h in enumerate(e.orders):
-            g = travel_gain(data.v, data.period, h / e.pitch_m, data.mode)
-            arg = h * k * x  # one phase for both, the same bits as computed twice
-            np.multiply(g, np.sin(arg), out=out[:, 2 * i])
-            np.multiply(g, np.cos(arg), out=out[:, 2 * i + 1])
+            g, sin, cos = _phase(data, e.pitch_m, h, kept)
+            np.multiply(g, sin, out=out[:, 2 * i])
+            np.multiply(g, cos, out=out[:, 2 * i + 1])
         return out
     if e.name == "thrust_ripple":
-        k = 2.0 * math.pi / e.pitch_m
-        g = travel_gain(data.v, data.period, 1.0 / e.pitch_m, data.mode) * data.regressor_force
-        arg = k * x
+        g, sin, cos = _phase(data, e.pitch_m, 1, kept)
+        g = g * data.regressor_force
         out = np.empty((len(x), 2))
-        np.multiply(g, np.sin(arg), out=out[:, 0])
-        np.multiply(g, np.cos(arg), out=out[:, 1])
+        np.multiply(g, sin, out=out[:, 0])
+        np.multiply(g, cos, out=out[:, 1])
         return out
     if e.name == "thrust_lag" and not e.dynamic:
         d = data.per_interval(lambda c: np.diff(c, prepend=c[0]), data.cmd) / data.period
@@ -292,12 +313,13 @@ def inputs_key(name: str, data: EquationData) -> bytes | None:
 
 
 def _projected_chunk(chunk: tuple[Effect, ...], data: EquationData,
-                     inputs: bytes | None) -> FloatArray:
+                     inputs: bytes | None, kept: Phases | None = None) -> FloatArray:
     """The members' raw columns filtered (:meth:`.kinematics.EquationData.project`), kept
     by the inputs' key and the members: measured, building and hashing the raw columns
-    was most of a scan whose filtered columns were already kept."""
+    was most of a scan whose filtered columns were already kept (``kept``: as in
+    :func:`raw_columns`)."""
     def compute() -> FloatArray:
-        raw = np.concatenate([raw_columns(e, data) for e in chunk], axis=1)
+        raw = np.concatenate([raw_columns(e, data, kept) for e in chunk], axis=1)
         if inputs is None:
             return data.project(raw)
         bounds = tuple(data.instants()) if data.parts else ()
@@ -321,13 +343,14 @@ def project_made(data: EquationData, what: bytes, make: Callable[[], FloatArray]
         data.sos, np.asarray(make(), dtype=np.float64), e, d, bounds))
 
 
-def family_chunks(fam: Family, data: EquationData) -> Iterator[tuple[int, FloatArray]]:
+def family_chunks(fam: Family, data: EquationData,
+                  kept: Phases | None = None) -> Iterator[tuple[int, FloatArray]]:
     """Filtered columns of the members, ``CHUNK`` columns at a time: (first member index,
-    array of shape (members in chunk, n, width))."""
+    array of shape (members in chunk, n, width)); ``kept`` as in :func:`raw_columns`."""
     width = fam.members[0].width
     inputs = inputs_key(fam.name, data)
     for start, chunk in _chunks(fam.members, max(1, CHUNK // width)):
-        proj = _projected_chunk(chunk, data, inputs)
+        proj = _projected_chunk(chunk, data, inputs, kept)
         if fam.name in FIRST_STAGE:
             proj = data.instrument(proj)
         yield start, proj.reshape(data.n, len(chunk), width).transpose(1, 0, 2)

@@ -22,7 +22,15 @@ from numpy.typing import NDArray
 
 from .estimate import remainder
 from .kinematics import EquationData, thinned
-from .library import INSTRUMENTED, Effect, Family, columns, families, family_chunks
+from .library import (
+    INSTRUMENTED,
+    Effect,
+    Family,
+    Phases,
+    columns,
+    families,
+    family_chunks,
+)
 from .stats import NestedTest, lstsq, nested_f_test
 
 FloatArray = NDArray[np.float64]
@@ -32,6 +40,8 @@ MIN_SHARE = 0.01
 MAX_EFFECTS = 6
 HARMONICS = (2, 3, 4)
 SUBHARMONICS = (2, 3)
+#: Families whose members are the same pitches (:func:`.library.pitch_grid`).
+PERIODIC = ("cogging", "thrust_ripple")
 
 
 @dataclass(frozen=True)
@@ -63,22 +73,42 @@ class Candidates:
     @classmethod
     def build(cls, data: EquationData, exclude: tuple[str, ...] = ()) -> Candidates:
         """Columns filtered a chunk at a time, Grams accumulated from the float64 chunk,
-        the float32 cache filled in place: the only copy of a family's columns kept."""
+        the float32 cache filled in place: the only copy of a family's columns kept.
+
+        Families of the same pitches (cogging, ripple) are built side by side, a chunk of
+        each in turn, sharing the travel gains and phases of the chunk's pitches
+        (:func:`.library.raw_columns`)."""
         fams = tuple(families(data, exclude))
-        cols, grams, gys = [], [], []
-        for f in fams:
-            k, m = len(f.members), f.members[0].width
-            c32 = np.empty((k, data.n, m), dtype=np.float32)
-            gram, gy = np.empty((k, m, m)), np.empty((k, m))
-            for start, c in family_chunks(f, data):
-                stop = start + len(c)
-                gram[start:stop] = np.einsum("knm,knp->kmp", c, c)
-                gy[start:stop] = np.einsum("knm,n->km", c, data.y)
-                c32[start:stop] = c
-            cols.append(c32)
-            grams.append(gram)
-            gys.append(gy)
+        cols = [np.empty((len(f.members), data.n, f.members[0].width), dtype=np.float32)
+                for f in fams]
+        grams = [np.empty((len(f.members), f.members[0].width, f.members[0].width))
+                 for f in fams]
+        gys = [np.empty((len(f.members), f.members[0].width)) for f in fams]
+        for group in _same_pitches(fams):
+            kept: Phases = {}
+            for chunks in zip(*(family_chunks(fams[i], data, kept) for i in group),
+                              strict=True):
+                for i, (start, c) in zip(group, chunks, strict=True):
+                    stop = start + len(c)
+                    grams[i][start:stop] = np.einsum("knm,knp->kmp", c, c)
+                    gys[i][start:stop] = np.einsum("knm,n->km", c, data.y)
+                    cols[i][start:stop] = c
+                kept.clear()  # the next chunk has other pitches
         return cls(fams, tuple(cols), tuple(grams), tuple(gys))
+
+
+def _same_pitches(fams: tuple[Family, ...]) -> list[tuple[int, ...]]:
+    """The families' indices in order, those of cogging and ripple together (where the
+    first of them is) when their members have the same pitches and width (so the same
+    chunks), the others alone."""
+    at = {f.name: i for i, f in enumerate(fams)}
+    pair = tuple(at[n] for n in PERIODIC if n in at)
+    same = len({(tuple(e.pitch_m for e in fams[i].members), fams[i].members[0].width)
+                for i in pair}) == 1
+    if len(pair) < 2 or not same:
+        return [(i,) for i in range(len(fams))]
+    return [pair if i == min(pair) else (i,) for i in range(len(fams)) if i not in pair
+            or i == min(pair)]
 
 
 def _family_err(cands: Candidates, i: int, q: FloatArray, qy: FloatArray,
