@@ -107,3 +107,18 @@ def test_the_fits_data_are_those_made_with_scipy(gap: int, closed: bool) -> None
     for name in fast[0]:  # type: ignore[attr-defined]
         assert _equal(fast[0][name], slow[0][name]), name  # type: ignore[index]
     assert all(_equal(a, b) for a, b in zip(fast[1:], slow[1:], strict=True))
+
+
+@pytest.mark.parametrize("shape", [(3500, 32), (700, 1), (400, 3), (5000, 40), (600,)])
+def test_thinned_columns_are_scipys_trimmed_and_decimated(shape: tuple[int, ...]) -> None:
+    """Filtered in kept buffers, trimmed and decimated: SciPy's bits, in an array of its
+    own (a later call does not change it), C-contiguous."""
+    rng = np.random.default_rng(len(shape) + shape[0])
+    sos = zerophase.butter_sos(4, 40.0, 500.0)
+    x, other = rng.standard_normal(shape), rng.standard_normal(shape)
+    got = zerophase.thinned_columns(sos, x, 38, 5)
+    want = np.ascontiguousarray(signal.sosfiltfilt(sos, x, axis=0)[38:shape[0] - 38:5])
+    kept = got.copy()
+    zerophase.thinned_columns(sos, other, 38, 5)
+    assert got.flags.c_contiguous and got.flags.owndata
+    assert _same(got, want) and np.array_equal(got, kept)

@@ -45,7 +45,7 @@ from .calibration import SpeedPrior, calibrated_friction
 from .feedback import high_band
 from .instruments import reading_instruments
 from .memo import ContentCache, content_key
-from .zerophase import butter_sos, sosfiltfilt
+from .zerophase import butter_sos, sosfiltfilt, thinned_columns
 
 FloatArray = NDArray[np.float64]
 
@@ -304,11 +304,8 @@ def projected(sos: FloatArray, arr: FloatArray, e: int, d: int,
     """``arr`` zero-phase filtered, ``e`` samples trimmed at each end and every ``d``-th
     kept: as one, or per part (``bounds``, rows of ``arr``) and the parts joined."""
     if not bounds:
-        f = sosfiltfilt(sos, arr, axis=0)
-        out: FloatArray = np.ascontiguousarray(f[e:len(f) - e:d])
-        return out
-    pieces = [sosfiltfilt(sos, arr[a:b], axis=0) for a, b in bounds]
-    return np.ascontiguousarray(np.concatenate([f[e:len(f) - e:d] for f in pieces]))
+        return thinned_columns(sos, arr, e, d)
+    return np.concatenate([thinned_columns(sos, arr[a:b], e, d) for a, b in bounds])
 
 
 def _nominal_dynamics(plant: Plant, rec: Recording, mode: str) -> tuple[FloatArray, ...]:
