@@ -1,15 +1,17 @@
 """The fit's F-distribution tail (:func:`pmsm_sysid.core.plantfit.stats.f_logsf`) gives
-what ``scipy.stats.f.logsf`` gives, bit for bit, across and at the edges of its range, and
-the held-out test's normal tail is ``scipy.stats.norm.sf``."""
+what ``scipy.stats.f.logsf`` gives, bit for bit, across and at the edges of its range; the
+held-out test's normal tail is ``scipy.stats.norm.sf``; and the whitening filter gives what
+``scipy.signal.lfilter`` gives, bit for bit and with its strides."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
-from scipy import special, stats
+import pytest
+from scipy import signal, special, stats
 
-from pmsm_sysid.core.plantfit.stats import f_logsf
+from pmsm_sysid.core.plantfit.stats import f_logsf, whiten
 
 #: Degrees of freedom of the tests the fit makes (small numerators, a few hundred to
 #: thousands of samples), and fractional ones
@@ -42,3 +44,15 @@ def test_f_logsf_refuses_what_scipy_refuses() -> None:
 def test_normal_tail_is_scipys() -> None:
     for z in (-40.0, -3.0, -1e-3, 0.0, 0.5, 2.0, 8.0, 40.0, math.inf, -math.inf):
         assert float(special.ndtr(-z)) == float(stats.norm.sf(z))
+
+
+@pytest.mark.parametrize("n", [5, 21, 683, 3499])
+def test_whiten_is_lfilter(n: int) -> None:
+    rng = np.random.default_rng(n)
+    for shape in ((n,), (n, 1), (n, 2), (n, 33)):
+        for order in (0, 1, 3, 20):
+            poly = np.concatenate([[1.0], 0.3 * rng.standard_normal(order)])
+            a = rng.standard_normal(shape)
+            got, want = whiten(poly, a), signal.lfilter(poly, [1.0], a, axis=0)[order:]
+            assert got.shape == want.shape and got.strides == want.strides
+            assert got.tobytes() == want.tobytes()
