@@ -108,7 +108,8 @@ def _buffers(shape: tuple[int, int]) -> tuple[FloatArray, FloatArray]:
 
 def thinned_columns(sos: FloatArray, x: FloatArray, edge: int, step: int) -> FloatArray:
     """``sosfiltfilt(sos, x, axis=0)[edge:len(x) - edge:step]`` as a new C-contiguous
-    array, the same bits, filtered in buffers each thread keeps between calls.
+    array, the same values (:func:`_paired`), filtered in buffers each thread keeps
+    between calls.
     Hand-written for speed: measured on a 3500 x 32 block, 1.78 ms with buffers allocated
     per call (their pages faulted in afresh each time), 1.17 ms with kept ones."""
     if not _fast(sos, x, 0) or x.ndim != 2:
@@ -116,10 +117,39 @@ def thinned_columns(sos: FloatArray, x: FloatArray, edge: int, step: int) -> Flo
             edge:len(x) - edge:step])
         return out
     rows = x.T  # (signals, samples), a view
+    if len(rows) % 2 == 0:
+        return _paired(sos, rows, edge, step)
     ext, back = _buffers((rows.shape[0], rows.shape[1] + 2 * _padlen(sos)))
     y = _passes(sos, rows, ext, back)
     kept: FloatArray = np.array(y[:, edge:len(x) - edge:step].T, order="C")  # a copy
     return kept
+
+
+def _paired(sos: FloatArray, rows: FloatArray, edge: int, step: int) -> FloatArray:
+    """:func:`thinned_columns` of an even number of ``rows``, filtered two at a time as
+    the real and imaginary parts of complex signals: SciPy's compiled loop then runs two
+    independent recursions side by side. A real coefficient times a complex value is
+    ``(a re - 0 im, a im + 0 re)``, the real products exactly, so each part comes out as
+    filtered alone (equal values; only a zero's sign could differ). Hand-written for
+    speed: measured 434 us per filter pass over 16 complex rows, 547 us over 32 real."""
+    half, n = len(rows) // 2, rows.shape[1]
+    p = _padlen(sos)
+    ext, back = (b.view(np.complex128) for b in _buffers((half, 2 * (n + 2 * p))))
+    ext.real[:, p:p + n] = rows[0::2]
+    ext.imag[:, p:p + n] = rows[1::2]
+    mid = ext[:, p:p + n]
+    ext[:, :p] = 2 * mid[:, :1] - mid[:, p:0:-1]
+    ext[:, p + n:] = 2 * mid[:, -1:] - mid[:, -2:-(p + 2):-1]
+    sos_c = np.ascontiguousarray(sos, dtype=np.complex128)
+    zi = _zi(np.ascontiguousarray(sos).tobytes(), sos.shape[0])
+    _sosfilt(sos_c, ext, np.ascontiguousarray(zi[None] * ext[:, 0, None, None]))
+    np.copyto(back, ext[:, ::-1])
+    _sosfilt(sos_c, back, np.ascontiguousarray(zi[None] * ext[:, -1, None, None]))
+    y = back[:, ::-1][:, p:p + n][:, edge:n - edge:step]
+    out: FloatArray = np.empty((y.shape[1], 2 * half))
+    out[:, 0::2] = y.real.T
+    out[:, 1::2] = y.imag.T
+    return out
 
 
 @functools.lru_cache(maxsize=64)
