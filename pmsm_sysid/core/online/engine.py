@@ -179,7 +179,7 @@ class OnlineEngine(Generic[R]):
 
     def _store(self, samples: list[Sample]) -> None:
         for s in samples:
-            if not all(math.isfinite(v) for v in s.values):
+            if not all(map(math.isfinite, s.values)):
                 self._dropped += 1
                 continue
             window = self.scheduler.push(s)

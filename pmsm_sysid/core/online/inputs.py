@@ -48,8 +48,12 @@ class SignalCount:
 
     def add(self, stamp_ns: int) -> None:
         self.messages += 1
-        self.first_ns = stamp_ns if self.first_ns is None else min(self.first_ns, stamp_ns)
-        self.last_ns = stamp_ns if self.last_ns is None else max(self.last_ns, stamp_ns)
+        if self.first_ns is None or self.last_ns is None:
+            self.first_ns = self.last_ns = stamp_ns
+        elif stamp_ns > self.last_ns:  # in order: the only comparison made
+            self.last_ns = stamp_ns
+        elif stamp_ns < self.first_ns:
+            self.first_ns = stamp_ns
 
     @property
     def rate_hz(self) -> float | None:
@@ -131,7 +135,8 @@ class InputAligner:
         if self.mode == "undecided":
             return self._hold((signal, stamp_ns, (float(value),)), signal == "speed",
                               signal == "position")
-        return self._take((signal, stamp_ns, (float(value),)))
+        assert self._inner is not None
+        return self._complete(self._inner.push(signal, stamp_ns, float(value)))
 
     def push_sample(self, stamp_ns: int, values: Sequence[float]) -> list[Sample]:
         """One sample holding every signal (JointState); a NaN speed counts as absent."""

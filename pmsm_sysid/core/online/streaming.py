@@ -153,7 +153,8 @@ class StampAligner:
         if slot is None:
             raise DataError(f"unknown signal '{signal}' (expected one of {self.signals})")
         self._n["messages"] += 1
-        self._learn_period(signal, stamp_ns)
+        if self.period_ns is None:
+            self._learn_period(signal, stamp_ns)
         return self._watch(signal, (slot, stamp_ns, (float(value),)))
 
     def push_sample(self, stamp_ns: int, values: Sequence[float]) -> list[Sample]:
@@ -193,7 +194,8 @@ class StampAligner:
         self._raw_last[key] = stamp
         hold = self._hold
         if hold is None:
-            if last is None or self._usual(stamp - last):
+            p = self.period_ns
+            if last is None or p is None or 0.5 * p < stamp - last < 1.5 * p:  # _usual
                 return self._accept(msg)
             self._hold = _Hold(key, stamp - last, msgs=[msg])
             return []
@@ -286,7 +288,14 @@ class StampAligner:
         return True
 
     def _find_or_add(self, stamp: int) -> _Entry:
-        tol = self.tolerance_ns
+        """The pending entry nearest ``stamp`` within the tolerance (the first of equals),
+        else a new one. In order, the only candidate is the newest entry: that is checked
+        first (with the other shortcuts of the in-order path, 90000 in-order messages through
+        InputAligner and the window ring: 303 -> 172 ms)."""
+        tol, keys = self.tolerance_ns, self._keys
+        if keys and stamp - tol <= keys[-1] <= stamp + tol and (
+                len(keys) == 1 or keys[-2] < stamp - tol):
+            return self._pending[-1]
         i = bisect.bisect_left(self._keys, stamp - tol)
         best: _Entry | None = None
         while i < len(self._keys) and self._keys[i] <= stamp + tol:
@@ -335,5 +344,8 @@ class StampAligner:
             index = self._last_index + step
         self._last_index, self._last_stamp = index, entry.stamp
         self._n["samples"] += 1
-        return Sample(index, entry.stamp, tuple(v if v is not None else float("nan")
-                                                for v in entry.values))
+        values = entry.values
+        if None in values:
+            return Sample(index, entry.stamp, tuple(v if v is not None else float("nan")
+                                                    for v in values))
+        return Sample(index, entry.stamp, tuple(values))  # type: ignore[arg-type]
