@@ -227,6 +227,39 @@ def test_saved_png_is_valid_and_sized(tmp_path: Path) -> None:
     assert px.shape[:2] == (460, 800) and px.std() > 0.05  # decodes, not blank
 
 
+
+def test_palette_keeps_the_background_and_up_to_255_colours_exactly() -> None:
+    from pmsm_sysid.plots.base import palette_image
+
+    rng = np.random.default_rng(3)
+    rgba = np.full((40, 60, 4), 255, dtype=np.uint8)
+    ink = rng.integers(0, 255, size=(255, 3), dtype=np.uint8)  # 255 colours, none white
+    rgba.reshape(-1, 4)[:255 * 4, :3] = np.repeat(ink, 4, axis=0)
+    image = palette_image(rgba)
+    assert image.mode == "P" and len(image.getpalette() or []) <= 3 * 256
+    np.testing.assert_array_equal(np.asarray(image.convert("RGB")), rgba[..., :3])
+    blank = palette_image(np.full((5, 7, 4), 200, dtype=np.uint8))  # nothing drawn
+    assert (np.asarray(blank.convert("RGB")) == 200).all()
+
+
+def test_palette_figure_is_its_full_colour_image_but_for_rare_edge_pixels() -> None:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from pmsm_sysid.plots.base import palette_image
+
+    k = np.arange(2000)
+    figure = plots.psd_pair(k / 4000, 1 + np.cos(k / 50) ** 2, 1 + np.sin(k / 30) ** 2,
+                            1000.0).figure
+    canvas = FigureCanvasAgg(figure)
+    canvas.draw()
+    rgba = np.asarray(canvas.buffer_rgba())
+    got = np.asarray(palette_image(rgba).convert("RGB")).astype(int)
+    err = np.abs(got - rgba[..., :3]).max(axis=-1)
+    white = (rgba[..., :3] == 255).all(axis=-1)
+    assert not err[white].any()  # the background exactly
+    assert (err > 0).mean() < 0.03 and err.mean() < 0.2
+
+
 # --- progress bars ---------------------------------------------------------------------
 
 def test_progress_is_silent_off_a_terminal(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -67,15 +67,41 @@ def hz_axis(ax: Axes, sample_rate_hz: float) -> None:
     sec.tick_params(labelsize=7)
 
 
+def palette_image(rgba: np.ndarray, colours: int = 256) -> PILImage.Image:
+    """An ``colours``-colour palette image of an RGBA canvas (alpha dropped).
+
+    The figure's background colour (its top-left pixel) keeps an exact palette entry of
+    its own; only the other pixels are reduced, by median cut (Pillow, no dithering), to
+    ``colours - 1`` colours. The background is most of a figure, so this quantizes a
+    tenth to two thirds of the pixels (nine report figures: 0.19 s against 0.09 s) and the
+    drawn pixels come out as a median cut of the whole image gave them.
+    """
+    height, width = rgba.shape[:2]
+    words = np.ascontiguousarray(rgba).view(np.uint32).reshape(-1)  # one word per pixel
+    ink = words != words[0]
+    rgb = np.ascontiguousarray(rgba.reshape(-1, 4)[ink, :3])
+    palette: list[int] = []
+    index = np.zeros(words.size, dtype=np.uint8)
+    if len(rgb):
+        drawn = PILImage.fromarray(rgb.reshape(1, -1, 3), mode="RGB").quantize(
+            colors=colours - 1, method=PILImage.Quantize.MEDIANCUT,
+            dither=PILImage.Dither.NONE)
+        palette = list(drawn.getpalette() or [])
+        index[ink] = np.asarray(drawn).reshape(-1)
+    index[~ink] = len(palette) // 3
+    image = PILImage.frombytes("P", (width, height), index.tobytes())
+    image.putpalette(palette + [int(c) for c in rgba.reshape(-1, 4)[0, :3]])
+    return image
+
+
 def save(plot: Plot, out_dir: str | Path, dpi: int = DPI, colours: int = 256) -> Path:
     """Write ``<out_dir>/<name>.png`` and return its path.
 
-    The image is stored with a palette of ``colours`` (Pillow, matplotlib's own image
-    library): line plots and contour maps look the same at a third of the size.
-    ``colours=0`` keeps full RGBA. The PNG is compressed at zlib's default level: the
-    highest level (Pillow's ``optimize``) took about 7x the encoding time (0.37 s against
-    0.05 s for the nine figures of a recording's report) for files 3-15 % smaller, with
-    the same pixels.
+    The image is stored with a palette of ``colours`` (see :func:`palette_image`): line
+    plots and contour maps look the same at a third of the size. ``colours=0`` keeps full
+    RGB. The PNG is compressed at zlib's default level: the highest level (Pillow's
+    ``optimize``) took about 7x the encoding time (0.37 s against 0.05 s for the nine
+    figures of a recording's report) for files 3-15 % smaller, with the same pixels.
     """
     path = Path(out_dir) / f"{plot.name}.png"
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -84,9 +110,7 @@ def save(plot: Plot, out_dir: str | Path, dpi: int = DPI, colours: int = 256) ->
         plot.figure.set_dpi(dpi)
         canvas.draw()  # type: ignore[no-untyped-call]
     rgba = np.asarray(canvas.buffer_rgba())  # type: ignore[no-untyped-call]
-    rgb = PILImage.fromarray(rgba, mode="RGBA").convert("RGB")
-    if colours:
-        rgb = rgb.quantize(colors=colours, method=PILImage.Quantize.MEDIANCUT,
-                           dither=PILImage.Dither.NONE)
-    rgb.save(path, format="PNG")
+    image = (palette_image(rgba, colours) if colours
+             else PILImage.fromarray(rgba, mode="RGBA").convert("RGB"))
+    image.save(path, format="PNG")
     return path
