@@ -272,3 +272,31 @@ def test_the_diagnosis_gives_the_fit_before_and_after_on_held_out_data() -> None
          "effects": [{"name": "coulomb_friction"}]}
     assert diagnosis_columns(d) == {"nrmse_before": 0.6, "nrmse_after": 0.2,
                                     "diagnosed": ["coulomb_friction"]}
+
+
+def test_date_ticks_are_found_once_per_view_as_matplotlib_finds_them(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from datetime import UTC, datetime
+
+    from matplotlib.dates import AutoDateLocator, date2num
+    from matplotlib.figure import Figure
+
+    from pmsm_sysid.plots.fleet import SteadyDateLocator
+
+    found = []
+    get_locator = AutoDateLocator.get_locator
+    monkeypatch.setattr(AutoDateLocator, "get_locator",
+                        lambda self, lo, hi: found.append(lo) or get_locator(self, lo, hi))
+    ax = Figure().subplots()
+    steady = SteadyDateLocator()
+    ax.xaxis.set_major_locator(steady)
+    reference = AutoDateLocator()
+    reference.set_axis(ax.xaxis)
+    for days in (3, 40):
+        ax.set_xlim(date2num(datetime(2024, 1, 1, tzinfo=UTC)),
+                    date2num(datetime(2024, 1, 1 + days % 28, tzinfo=UTC)) + days // 28 * 28)
+        found.clear()
+        ticks = [steady() for _ in range(5)]
+        assert len(found) == 1  # computed once for this view
+        for t in ticks:
+            np.testing.assert_array_equal(t, reference())
