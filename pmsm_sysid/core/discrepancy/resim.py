@@ -99,6 +99,24 @@ def _replay(plant: Plant, rec: Recording, h: int, parts: tuple[int, ...] = ()) -
                   pos, h, parts)
 
 
+#: replays of one recording (and parts) by the plant as replayed and the horizon in samples
+Replays = dict[tuple[Plant, int], Replay]
+
+
+def kept_replay(plant: Plant, rec: Recording, h: int, parts: tuple[int, ...],
+                kept: Replays | None) -> Replay:
+    """``_replay`` once per noise-free plant and horizon: ``kept`` holds the replays of this
+    recording and these parts (a replay is a function of them alone). The horizon's drift
+    replay is the estimation replay of a cogging plant when the horizon stays at its
+    maximum: on a cogging recording one replay of four saved (0.07 s)."""
+    if kept is None:
+        return _replay(plant, rec, h, parts)
+    key = (_clean(plant), h)
+    if key not in kept:
+        kept[key] = _replay(plant, rec, h, parts)
+    return kept[key]
+
+
 def periodic_components(plant: Plant, thrust_rms: float) -> list[tuple[float, float]]:
     """(amplitude N, wavenumber rad/m) of the plant's position-periodic forces; a thrust
     ripple's amplitude is its relative size times the rms thrust."""
@@ -170,9 +188,10 @@ class Horizon:
 
 
 def choose_horizon(plants: tuple[Plant, ...], rec: Recording, max_s: float = HORIZON_S,
-                   parts: tuple[int, ...] = ()) -> Horizon:
+                   parts: tuple[int, ...] = (), kept: Replays | None = None) -> Horizon:
     """The longest horizon (≤ ``max_s``) over which each plant's periodic forces stay
-    within ``PERIODIC_LEFT`` of their energy (module doc), on this recording."""
+    within ``PERIODIC_LEFT`` of their energy (module doc), on this recording; the replays
+    it makes go into ``kept`` (see :func:`kept_replay`)."""
     fs = rec.sample_rate_hz
     h_max = max(2, round(max_s * fs))
     floor = min(MIN_HORIZON_SAMPLES, h_max)
@@ -183,7 +202,7 @@ def choose_horizon(plants: tuple[Plant, ...], rec: Recording, max_s: float = HOR
         if not comps:
             continue
         s_max = allowed_drift(comps)
-        prof = drift_profile(_replay(plant, rec, h_max, parts), rec)
+        prof = drift_profile(kept_replay(plant, rec, h_max, parts, kept), rec)
         n_ok = int(np.searchsorted(prof, s_max, side="right"))
         ok = max(n_ok, floor)
         if ok <= h:
@@ -211,15 +230,17 @@ class ReplayComparison:
 
 
 def compare(before: Plant, after: Plant, rec: Recording, horizon: Horizon | None = None,
-            parts: tuple[int, ...] = ()) -> ReplayComparison:
-    """Replay ``rec`` through both plants at ``horizon`` (default: :func:`choose_horizon`)."""
-    hz = horizon if horizon is not None else choose_horizon((before, after), rec, parts=parts)
+            parts: tuple[int, ...] = (), kept: Replays | None = None) -> ReplayComparison:
+    """Replay ``rec`` through both plants at ``horizon`` (default: :func:`choose_horizon`);
+    ``kept``: replays of ``rec`` and ``parts`` already made (:func:`kept_replay`)."""
+    hz = horizon if horizon is not None else choose_horizon((before, after), rec, parts=parts,
+                                                            kept=kept)
     if hz.samples != round(hz.horizon_s * rec.sample_rate_hz):
         hz = replace(hz, samples=max(2, round(hz.horizon_s * rec.sample_rate_hz)))
-    rb = _replay(before, rec, hz.samples, parts)
+    rb = kept_replay(before, rec, hz.samples, parts, kept)
     if _clean(after) == _clean(before):
         return ReplayComparison(rb, rb, hz, 0.0, "same")
-    ra = _replay(after, rec, hz.samples, parts)
+    ra = kept_replay(after, rec, hz.samples, parts, kept)
     z = _paired_z(rb.speed, ra.speed, rec.speed, hz.samples, parts)
     verdict = "better" if z >= Z_VERDICT else "worse" if z <= -Z_VERDICT else "unresolved"
     return ReplayComparison(rb, ra, hz, z, verdict)

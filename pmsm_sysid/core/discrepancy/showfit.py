@@ -41,7 +41,7 @@ from ..validation.correlation import correlation_tests
 from .local import local_grid, local_share
 from .locate import AxisFinding, scan_axes
 from .nonparam import AxisModel, beside_thrust, fit_axis, fit_axis_with
-from .resim import Z_VERDICT, choose_horizon, compare
+from .resim import Z_VERDICT, Replays, choose_horizon, compare
 
 FloatArray = NDArray[np.float64]
 
@@ -246,13 +246,15 @@ def fit_table(plant: Plant, corrected: Plant, fit: Fit, segs: Any, do_replay: bo
         pieces = segs.pieces(name)
         return tuple(len(p) for p in pieces) if len(pieces) > 1 else ()
 
+    kept: Replays = {}  # the estimation recording's replays, drift and comparison alike
     horizon = choose_horizon((plant, corrected), segs.recs["estimation"],
-                             parts=sizes("estimation")) if do_replay else None
+                             parts=sizes("estimation"), kept=kept) if do_replay else None
     for name, d in (("estimation", segs.est), ("validation", segs.val)):
         row = _segment_fit(fit, d, extra)
         if horizon is not None:
             rec = segs.recs[name]
-            cmp = compare(plant, corrected, rec, horizon, sizes(name))
+            cmp = compare(plant, corrected, rec, horizon, sizes(name),
+                          kept if name == "estimation" else None)
             row["output_error"] = cmp.to_dict()
             replays[name] = {"t": rec.t, "measured": rec.speed, "before": cmp.before.speed,
                              "after": cmp.after.speed}
