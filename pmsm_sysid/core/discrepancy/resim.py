@@ -108,7 +108,7 @@ def kept_replay(plant: Plant, rec: Recording, h: int, parts: tuple[int, ...],
     """``_replay`` once per noise-free plant and horizon: ``kept`` holds the replays of this
     recording and these parts (a replay is a function of them alone). The horizon's drift
     replay is the estimation replay of a cogging plant when the horizon stays at its
-    maximum: on a cogging recording one replay of four saved (0.07 s)."""
+    maximum: on a simulated cogging recording one replay of five saved (about 0.05 s)."""
     if kept is None:
         return _replay(plant, rec, h, parts)
     key = (_clean(plant), h)

@@ -231,7 +231,8 @@ class MotorSimulator:
 
         The same states as ``set_state``/``state``/``advance`` per sample, for a plant without
         a noise block only (its measurement draws are skipped: nothing measures). One loop
-        with the state in locals: 4 replays of a 10 s recording 0.37 s -> 0.28 s."""
+        with the state in locals (with Rk4's unlagged paths, diagnose of a simulated 10 s
+        recording 0.18 s -> 0.14 s of CPU)."""
         if self._plant.noise is not None:
             raise PlantError("replay needs a plant without a noise block")
         history, draw, run = self._history, self._force_noise.draw, self._rk4.run
