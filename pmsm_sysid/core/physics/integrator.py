@@ -133,7 +133,8 @@ class Rk4:
         if self.tau <= 0.0:
             if self.effects is None and self.smoothing <= 0.0:
                 return self._run_linear(x, v, steps, h, cmd, w)
-            return self._run_unlagged(x, v, steps, h, cmd, w)
+            if self.effects is not None:
+                return self._run_unlagged(x, v, steps, h, cmd, w, self.effects)
         tau, inv_m, b, lam, eff = self.tau, self.inv_m, self.b, self.lam, self.effects
         smooth, lagged = self.smoothing, tau > 0.0
         h_coefs = self.coefficients(h)
@@ -187,18 +188,19 @@ class Rk4:
         return x, v, f
 
     def _run_unlagged(self, x: float, v: float, steps: int, h: float, cmd: float,
-                      w: float) -> tuple[float, float, float]:
-        """:meth:`run` without a thrust lag: the lag terms' values written in (d = F - cmd
-        and phi are 0, F(t) = cmd + 0.0), every remaining operation as in :meth:`run`, so
-        the numbers are the same bit for bit; measured with MotorSimulator.replay, a
-        replayed sample of a plant with Coulomb friction 12.5 us -> 9.8 us."""
-        inv_m, b, eff, smooth = self.inv_m, self.b, self.effects, self.smoothing
+                      w: float, eff: EffectForce) -> tuple[float, float, float]:
+        """:meth:`run` without a thrust lag, with an effect force ``eff``: the lag terms'
+        values written in (d = F - cmd and phi are 0, F(t) = cmd + 0.0), every remaining
+        operation as in :meth:`run`, so the numbers are the same bit for bit; measured with
+        MotorSimulator.replay, a replayed sample of a plant with Coulomb friction
+        12.5 us -> 9.8 us."""
+        inv_m, b, smooth = self.inv_m, self.b, self.smoothing
         f, fz = cmd, cmd + 0.0
         mid_fix = self.lam * 0.0 - (fz - cmd) * inv_m
         end_lam, end_fix = self.lam * 0.0, (fz - cmd) * inv_m
         near, h_rate = 5.0 * smooth, h * self.fric_rate
         for _ in range(steps):
-            a1 = (f + w - b * v - (eff(x, v, f) if eff is not None else 0.0)) * inv_m
+            a1 = (f + w - b * v - eff(x, v, f)) * inv_m
             pieces = 1
             if smooth > 0.0:
                 dv = h * a1 + 0.0
@@ -210,20 +212,17 @@ class Rk4:
             hh, h6 = 0.5 * hp, hp / 6.0
             for j in range(pieces):
                 if j:
-                    a1 = (f + w - b * v - (eff(x, v, f) if eff is not None else 0.0)) * inv_m
+                    a1 = (f + w - b * v - eff(x, v, f)) * inv_m
                 k1 = a1
                 v2 = v + hh * k1 + 0.0
                 xa = x + hh * v
-                k2 = (fz + w - b * v2 - (eff(xa, v2, fz) if eff is not None else 0.0)
-                      ) * inv_m + mid_fix
+                k2 = (fz + w - b * v2 - eff(xa, v2, fz)) * inv_m + mid_fix
                 v3 = v + hh * k2 + 0.0
                 xa = x + hh * v2
-                k3 = (fz + w - b * v3 - (eff(xa, v3, fz) if eff is not None else 0.0)
-                      ) * inv_m + mid_fix
+                k3 = (fz + w - b * v3 - eff(xa, v3, fz)) * inv_m + mid_fix
                 v4 = v + hp * k3 + 0.0
                 xa = x + hp * v3
-                k4 = ((fz + w - b * v4 - (eff(xa, v4, fz) if eff is not None else 0.0)
-                       ) * inv_m + end_lam - end_fix)
+                k4 = ((fz + w - b * v4 - eff(xa, v4, fz)) * inv_m + end_lam - end_fix)
                 x = x + h6 * (v + 2.0 * v2 + 2.0 * v3 + v4)
                 v = v + h6 * (k1 + 2.0 * k2 + 2.0 * k3 + k4) + 0.0
                 f = fz
