@@ -131,3 +131,35 @@ def test_the_block_draws_are_the_single_draws() -> None:
         got = [a.draw() for _ in range(3 * motor.NOISE_BLOCK + 5)]
         want = [float(b.standard_normal()) for _ in range(len(got))]
         assert got == want
+
+
+@pytest.mark.parametrize("name", [n for n, p in _plants().items() if p.thrust_lag is None])
+def test_unlagged_steps_are_the_general_step_bit_for_bit(name: str) -> None:
+    sim = motor.MotorSimulator(_plants()[name], seed=0)
+    rk4 = sim._rk4
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        x, v, f, cmd, w = (float(a) for a in rng.normal(0.0, [0.01, 0.3, 20.0, 20.0, 1.0]))
+        v = float(rng.choice([v, 0.0, -0.0, 1e-4 * v]))
+        cmd = float(rng.choice([cmd, 0.0, -0.0]))
+        steps = int(rng.integers(1, 9))
+        got = rk4.run(x, v, f, steps * rk4.h_max, cmd, w)
+        want = rk4._run_general(x, v, f, steps, steps * rk4.h_max / steps, cmd, w)
+        assert np.array(got).tobytes() == np.array(want).tobytes(), name
+
+
+@pytest.mark.parametrize("name", [n for n, p in _plants().items() if p.noise is None])
+def test_replay_is_set_state_and_advance_per_sample(name: str) -> None:
+    plant = _plants()[name]
+    rec = motor.simulate(plant, _drive(3), seed=3)
+    restart = list(range(0, N, 37))
+    pos, spd = rec.position.tolist(), rec.speed.tolist()
+    got = motor.MotorSimulator(plant, seed=0).replay(rec.thrust.tolist(), restart, pos, spd)
+    sim, want = motor.MotorSimulator(plant, seed=0), ([], [])
+    for k, u in enumerate(rec.thrust.tolist()):
+        if k in restart:
+            sim.set_state(pos[k], spd[k])
+        want[0].append(sim.state.speed_mps)
+        want[1].append(sim.state.position_m)
+        sim.advance(u)
+    assert np.array(got).tobytes() == np.array(want).tobytes(), name

@@ -135,8 +135,16 @@ class Rk4:
                 return self._run_linear(x, v, steps, h, cmd, w)
             if self.effects is not None:
                 return self._run_unlagged(x, v, steps, h, cmd, w, self.effects)
+        return self._run_general(x, v, f, steps, h, cmd, w)
+
+    def _run_general(self, x: float, v: float, f: float, steps: int, h: float, cmd: float,
+                     w: float) -> tuple[float, float, float]:
+        """:meth:`run` for any plant: ``steps`` RK4 steps of ``h`` (what the unlagged paths
+        stand for, bit for bit)."""
         tau, inv_m, b, lam, eff = self.tau, self.inv_m, self.b, self.lam, self.effects
         smooth, lagged = self.smoothing, tau > 0.0
+        if not lagged:
+            f = cmd
         h_coefs = self.coefficients(h)
         near = 5.0 * smooth
         h_rate = h * self.fric_rate
