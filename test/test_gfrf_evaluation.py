@@ -2,24 +2,28 @@
 
 The engine forms e^{-j2pi(f_a+...)l} as products of per-argument powers, sums the numerators
 of the orderings of Eq. 9 over one denominator and recomputes products instead of keeping
-them. The reference below takes the frequency sum first and a complex exponential per lag,
-each ordering of Eq. 9 on its own (the plain reading of the equations), so a slip in the
-reorganised engine shows as a mismatch. Stated tolerance: 1e-9 of the largest |H_n| of the
-array compared (rounding differences are about 1e-13); on the paper model, the same peaks
-and ridges as an analysis run on the reference, their frequencies and levels within 1e-9.
+them. The reference (``reference_h`` of bench/gfrf_bench.py) takes the frequency sum first
+and a complex exponential per lag, each ordering of Eq. 9 on its own (the plain reading of
+the equations), so a slip in the reorganised engine shows as a mismatch. Stated
+tolerance: 1e-9 of the largest |H_n| of the array compared (rounding differences are about
+1e-13); on the paper model, the same peaks and ridges as an analysis run on the reference,
+their frequencies and levels within 1e-9.
 """
 
 from __future__ import annotations
 
-import itertools
 import json
-import math
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+
+from gfrf_bench import direct_sym, reference_h
 
 from pmsm_sysid.core.frequency import gfrf as gfrf_module
 from pmsm_sysid.core.frequency.analysis import analyse
@@ -56,42 +60,6 @@ def _model(terms: dict[str, float]) -> NarxModel:
 def _paper() -> NarxModel:
     return NarxModel.from_dict(json.loads((ROOT / "examples/paper_table2_speed.json")
                                           .read_text()))
-
-
-def _ex(fs: Any, lag: int) -> Any:
-    return np.exp(-2j * np.pi * lag * fs)
-
-
-def _poly(c: Any, fs: Any) -> Any:
-    return sum((c[lag] * _ex(fs, lag) for lag in np.flatnonzero(c)), np.zeros_like(fs, complex))
-
-
-def reference_h(g: Gfrf, *freqs: Any, symmetric: bool = True) -> Any:
-    """Eqs. 7-9 as written: H_n^asym per ordering, the frequency sum before each exponential."""
-    f = [np.asarray(x, dtype=np.float64) for x in freqs]
-
-    def asym(args: tuple[Any, ...]) -> Any:
-        fs, m = sum(args), len(args)
-        num: Any = _poly(g.b, fs) if m == 1 else 0.0
-        for t in g.nonlinear:
-            p, q = len(t.y_lags), len(t.u_lags)
-            if p + q > m or (p == 0 and q != m):
-                continue
-            ue = math.prod((_ex(a, lag) for a, lag in zip(args[m - q:], t.u_lags,
-                                                          strict=True)), start=1.0 + 0j)
-            num = num + t.coef * ue * (hnp(args[:m - q], t.y_lags) if p else 1.0)
-        return num / (1.0 - _poly(g.a, fs))
-
-    def hnp(args: tuple[Any, ...], lags: tuple[int, ...]) -> Any:
-        if len(lags) == 1:
-            return asym(args) * _ex(sum(args), lags[0])
-        return sum(asym(args[:i]) * hnp(args[i:], lags[:-1]) * _ex(sum(args[:i]), lags[-1])
-                   for i in range(1, len(args) - len(lags) + 2))
-
-    shape = np.broadcast_shapes(*(x.shape for x in f))
-    orders = list(itertools.permutations(f)) if symmetric else [tuple(f)]
-    total = sum(asym(perm) for perm in orders)
-    return np.broadcast_to(total / len(orders), shape)
 
 
 def _close(new: Any, ref: Any) -> None:
@@ -152,10 +120,7 @@ def test_analysis_finds_what_the_direct_evaluation_finds(
     analysis on the reference would add seconds to the suite)."""
     found, values = _summary(analyse(_paper()))
 
-    def sym(g: Gfrf, f: list[Any], labels: tuple[int, ...], symmetric: bool) -> Any:
-        return reference_h(g, *f, symmetric=symmetric)
-
-    monkeypatch.setattr(gfrf_module.Gfrf, "_sym", sym)
+    monkeypatch.setattr(gfrf_module.Gfrf, "_sym", direct_sym)
     ref_found, ref_values = _summary(analyse(_paper()))
     assert sum(1 for r in found if r[0] != "h1") >= 4
     assert found == ref_found
