@@ -419,25 +419,48 @@ def _worker_settings() -> tuple[bool, str | None, str | None]:
             os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("OPENBLAS_NUM_THREADS"))
 
 
-def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_threshold() -> None:
+def _worker_modules() -> tuple[int, list[str]]:
+    """The worker's parent process and the numerical modules it has loaded."""
+    import os
+
+    return os.getppid(), sorted(m for m in sys.modules
+                                if m.split(".")[0] in ("pmsm_sysid", "numpy", "scipy"))
+
+
+def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_threshold(
+        tmp_path: Path) -> None:
     """Dask's profiler samples every thread's stack each 10 ms, and the glibc trim threshold
     Dask's nannies set maps every array over 128 kB anew; the fleet's local workers have
     neither (they cost about a fifth of a worker's CPU time each on fleet rows), and keep
-    one BLAS thread."""
+    one BLAS thread. They are forked from a fork server (not children of this process)
+    that imported what a row needs: a row against a plant or a simulator's recording then
+    imports no numerical module of its own."""
     import dask
     import dask.distributed  # loads Dask distributed's settings
 
+    from pmsm_sysid.api.fleet_row import ROW_MODULES
     from pmsm_sysid.batch.cluster import local_cluster
 
-    def defaults() -> tuple[object, object]:
+    def defaults() -> tuple[object, object, object]:
         return (dask.config.get("distributed.worker.profile.enabled"),
-                dask.config.get("distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"))
+                dask.config.get("distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"),
+                dask.config.get("distributed.worker.multiprocessing-method"))
 
-    assert defaults() == (True, 65536)  # Dask's defaults
+    assert defaults() == (True, 65536, "spawn")  # Dask's defaults
+    real, sim = (recording(tmp_path / name, drive(), seed=seed, day=0)
+                 for name, seed in (("real", 11), ("sim", 12)))
     with local_cluster(1) as client:
         got = client.run(_worker_settings)
+        (parent, before), = client.run(_worker_modules).values()
+        rows = client.gather([client.submit(recording_row, real, ps.Plant.from_yaml(NOMINAL)),
+                              client.submit(recording_row, real, sim=str(sim))])
+        (_, after), = client.run(_worker_modules).values()
     assert list(got.values()) == [(False, None, "1")]
-    assert defaults() == (True, 65536)  # left as they were
+    assert parent != os.getpid()
+    assert set(ROW_MODULES) <= set(before)
+    assert [r["status"] for r in rows] == ["ok", "ok"], [r["error"] for r in rows]
+    assert sorted(set(after) - set(before)) == []
+    assert defaults() == (True, 65536, "spawn")  # left as they were
 
 
 @pytest.mark.slow

@@ -23,6 +23,13 @@ if TYPE_CHECKING:
     from ..core.discrepancy.fitted import PlantFitResult
     from ..core.recording.spans import Excerpt
 
+#: The modules a row imports (lazily, as it needs them): a scheduler that starts its
+#: workers from a fork server preloads them there, so no worker imports them again.
+ROW_MODULES = ("pmsm_sysid.api.fleet_row", "pmsm_sysid.api.plantfit",
+               "pmsm_sysid.api.diagnosis", "pmsm_sysid.api.recordings", "pmsm_sysid.bagio.spans",
+               "pmsm_sysid.core.fleet", "pmsm_sysid.core.discrepancy.fitted",
+               "pmsm_sysid.core.discrepancy.against")
+
 #: Recordings shorter than this (s) are refused by default: a few seconds of data give
 #: parameters too uncertain to follow over time.
 MIN_DURATION_S = 5.0
