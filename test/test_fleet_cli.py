@@ -263,6 +263,60 @@ def test_a_batch_killed_half_way_resumes_without_losing_or_repeating_a_row(
     assert third.returncode == 0 and "0 recording axes analysed" in third.stdout, third.stdout
 
 
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+def test_ctrl_c_while_the_local_cluster_starts_is_one_line(
+        tmp_path: Path, five_recordings: list[Path]) -> None:
+    """A terminal's Ctrl-C (SIGINT to every process of the group: the CLI, its fork server
+    and the workers) as soon as the CLI has started another process: the one line saying
+    what was kept, exit 130, no traceback from any process, nothing left running."""
+    out = tmp_path / "out"
+    proc = subprocess.Popen([str(EXE), "fleet", *map(str, five_recordings[:2]), "--plant",
+                             str(NOMINAL), "--out", str(out), "--workers", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, env=dict(os.environ,
+                                                             PMSM_SYSID_PROGRESS="0"))
+    try:
+        deadline = time.monotonic() + DEADLINE_S
+        while not _others_in_group(proc.pid) and proc.poll() is None:  # workers starting
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=DEADLINE_S)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, (stdout, stderr)
+    lines = [ln for ln in (stdout + stderr).splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("fleet: interrupted after "), lines
+    deadline = time.monotonic() + 60.0  # the fork server ends once it sees the CLI gone
+    while _group_alive(proc.pid):
+        assert time.monotonic() < deadline, "a process of the fleet outlived it"
+        time.sleep(0.05)
+
+
+def _others_in_group(pgid: int) -> list[int]:
+    """The processes of process group ``pgid`` other than its leader (Linux /proc)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue  # ended meanwhile
+        if int(fields[2]) == pgid and int(stat.parent.name) != pgid:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
 # ----------------------------------------------------------------------- --sim
 
 
@@ -410,21 +464,35 @@ def test_a_long_recording_is_used_in_the_spans_fit_plant_and_diagnose_use(
     assert row["diagnosed"] == [e["name"] for e in found["effects"]] == ["coulomb_friction"]
 
 
-def _worker_settings() -> tuple[bool, str | None, str | None]:
-    import os
+#: In a process of its own (a fork server runs once per process, with the imports of
+#: whoever started it): a local cluster of one worker, its settings, the numerical modules
+#: loaded in it before and after a row against a plant and one against a simulator's
+#: recording, as JSON.
+CLUSTER_SCRIPT = """
+import json, os, sys
+import dask
+import pmsm_sysid as ps
+from pmsm_sysid.api.fleet_row import recording_row
+from pmsm_sysid.batch.cluster import local_cluster
 
-    import dask
-
+def settings():
     return (dask.config.get("distributed.worker.profile.enabled"),
             os.environ.get("MALLOC_TRIM_THRESHOLD_"), os.environ.get("OPENBLAS_NUM_THREADS"))
 
-
-def _worker_modules() -> tuple[int, list[str]]:
-    """The worker's parent process and the numerical modules it has loaded."""
-    import os
-
+def modules():
     return os.getppid(), sorted(m for m in sys.modules
                                 if m.split(".")[0] in ("pmsm_sysid", "numpy", "scipy"))
+
+real, sim, plant = sys.argv[1:4]
+with local_cluster(1) as client:
+    (got,) = client.run(settings).values()
+    (parent, before), = client.run(modules).values()
+    rows = client.gather([client.submit(recording_row, real, ps.Plant.from_yaml(plant)),
+                          client.submit(recording_row, real, sim=sim)])
+    (_, after), = client.run(modules).values()
+print(json.dumps({"settings": got, "parent": parent, "me": os.getpid(), "before": before,
+                  "after": after, "rows": [[r["status"], r["error"]] for r in rows]}))
+"""
 
 
 def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_threshold(
@@ -432,9 +500,9 @@ def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_thresh
     """Dask's profiler samples every thread's stack each 10 ms, and the glibc trim threshold
     Dask's nannies set maps every array over 128 kB anew; the fleet's local workers have
     neither (they cost about a fifth of a worker's CPU time each on fleet rows), and keep
-    one BLAS thread. They are forked from a fork server (not children of this process)
-    that imported what a row needs: a row against a plant or a simulator's recording then
-    imports no numerical module of its own."""
+    one BLAS thread. They are forked from a fork server (not children of the caller) that
+    imported what a row needs: a row against a plant or a simulator's recording then
+    imports no numerical module of its own. Dask's own settings are left as they were."""
     import dask
     import dask.distributed  # loads Dask distributed's settings
 
@@ -447,20 +515,21 @@ def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_thresh
                 dask.config.get("distributed.worker.multiprocessing-method"))
 
     assert defaults() == (True, 65536, "spawn")  # Dask's defaults
+    with local_cluster(1):
+        pass
+    assert defaults() == (True, 65536, "spawn")  # left as they were
     real, sim = (recording(tmp_path / name, drive(), seed=seed, day=0)
                  for name, seed in (("real", 11), ("sim", 12)))
-    with local_cluster(1) as client:
-        got = client.run(_worker_settings)
-        (parent, before), = client.run(_worker_modules).values()
-        rows = client.gather([client.submit(recording_row, real, ps.Plant.from_yaml(NOMINAL)),
-                              client.submit(recording_row, real, sim=str(sim))])
-        (_, after), = client.run(_worker_modules).values()
-    assert list(got.values()) == [(False, None, "1")]
-    assert parent != os.getpid()
-    assert set(ROW_MODULES) <= set(before)
-    assert [r["status"] for r in rows] == ["ok", "ok"], [r["error"] for r in rows]
-    assert sorted(set(after) - set(before)) == []
-    assert defaults() == (True, 65536, "spawn")  # left as they were
+    proc = subprocess.run([sys.executable, "-c", CLUSTER_SCRIPT, str(real), str(sim),
+                           str(NOMINAL)], capture_output=True, text=True, timeout=DEADLINE_S,
+                          env=dict(os.environ, OPENBLAS_NUM_THREADS="1"))
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    got = json.loads(proc.stdout.splitlines()[-1])
+    assert got["settings"] == [False, None, "1"]
+    assert got["parent"] != got["me"]
+    assert set(ROW_MODULES) <= set(got["before"])
+    assert got["rows"] == [["ok", None], ["ok", None]]
+    assert sorted(set(got["after"]) - set(got["before"])) == []
 
 
 @pytest.mark.slow

@@ -551,20 +551,25 @@ RUN_RECORD = (signal.SIGINT, signal.SIGKILL)
 
 def _run_record_and_signal(domain: int, tmp: Path, sig: int) -> tuple[int, str, Path, Path, int]:
     """``run --record`` signalled once 2500 messages are flushed to the bag: exit code,
-    stderr, the bag, the summary JSON and the messages flushed before the signal."""
+    stderr, the bag, the summary JSON and the messages flushed before the signal. SIGINT
+    as a terminal's Ctrl-C sends it, to every process of the run's process group (its fit
+    worker and recorder too); SIGKILL to the run process alone."""
     bag, out = tmp / "live", tmp / "run.json"
     proc = subprocess.Popen([sys.executable, "-m", "pmsm_sysid.cli", "run", "--record",
                              str(bag), "--json", str(out), "--nodes", "sim,identifier",
                              "--outputs", "speed"],
                             env=_env(domain, tmp), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and _flushed(bag) < 2500:
             assert proc.poll() is None, proc.communicate()
             time.sleep(0.05)
         flushed = _flushed(bag)
-        proc.send_signal(sig)
+        if sig == signal.SIGINT:
+            os.killpg(proc.pid, sig)
+        else:
+            proc.send_signal(sig)
         _, err = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
@@ -593,9 +598,9 @@ def run_records(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[int, 
 def test_run_record_interrupted_or_killed(run_records: dict[int, Future[Any]],
                                           sig: int) -> None:
     """``run --record``: Ctrl-C finalises the bag with every message recorded (the summary
-    says how many); a hard kill leaves a bag a stock reader opens as it is, holding at least
-    everything flushed before the kill, the input topics unbroken from their start.
-    (SIGTERM: ``test/test_run_cli.py``.)"""
+    says how many), and no process of the run prints a traceback; a hard kill leaves a bag
+    a stock reader opens as it is, holding at least everything flushed before the kill, the
+    input topics unbroken from their start. (SIGTERM: ``test/test_run_cli.py``.)"""
     import json
 
     returncode, err, bag, out, flushed = run_records[sig].result(timeout=300)

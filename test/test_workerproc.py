@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -106,6 +107,27 @@ def test_worker_runs_elsewhere_reraises_and_replaces_a_dead_process() -> None:
         assert worker.pid not in (None, pid)
     with pytest.raises(WorkerDied):
         worker(None)  # closed
+
+
+def _sigint_ignored(_: object) -> bool:
+    """In the worker: is SIGINT ignored?"""
+    return signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+
+
+def _sigint_probe() -> Callable[[object], bool]:
+    return _sigint_ignored
+
+
+def test_a_terminals_ctrl_c_is_for_the_owner_not_the_worker() -> None:
+    """A Ctrl-C reaches every process of the terminal's process group: the worker ignores
+    it (its owner closes it), so it is not interrupted mid-item with a traceback, and it
+    still serves items after one."""
+    with ProcessWorker[object, bool](_sigint_probe) as worker:
+        assert worker(None) is True
+        pid = worker.pid
+        assert pid is not None
+        os.kill(pid, signal.SIGINT)
+        assert worker(None) is True and worker.pid == pid and worker.restarts == 0
 
 
 GATED = '''

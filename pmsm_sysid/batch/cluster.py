@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import logging
 import re
+import signal
+import threading
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
@@ -128,17 +130,35 @@ def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> Client:
 
 
 def _preload_rows() -> None:
-    """Have the fork server the local workers start from import what a row needs, when
-    the configured start method is ``forkserver`` and the server is not running yet (a
-    running one keeps its imports: the workers then import the rest themselves)."""
+    """Have the fork server the local workers start from import what a row needs, and
+    start it (SIGINT blocked in it and its workers), when the configured start method is
+    ``forkserver`` and the server is not running yet (a running one keeps its imports: the
+    workers then import the rest themselves)."""
     import dask
     from distributed.utils import get_mp_context
 
     from ..api.fleet_row import ROW_MODULES
+    from ..core.online.workerproc import start_server
 
-    ctx = get_mp_context()  # Dask's context, after Dask chose its own preload (once)
+    get_mp_context()  # Dask chooses its own preload here, once: ours replaces it
     if dask.config.get("distributed.worker.multiprocessing-method") == "forkserver":
-        ctx.set_forkserver_preload(["distributed", "numpy", *ROW_MODULES])
+        start_server(["distributed", "numpy", *ROW_MODULES])  # deaf to Ctrl-C (docstring)
+
+
+@contextmanager
+def _interrupt_held(interrupted: list[int]) -> Iterator[None]:
+    """While active (in the main thread), a SIGINT is noted in ``interrupted`` instead of
+    raising: a cluster interrupted while its workers start leaves them starting against a
+    parent that has gone, each with a traceback; the caller stops once it has started."""
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is None:  # a handler set outside Python
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: interrupted.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 @contextmanager
@@ -150,8 +170,9 @@ def local_cluster(workers: int) -> Iterator[Client]:
     import dask
     from dask.distributed import Client, LocalCluster
 
+    interrupted: list[int] = []
     try:
-        with dask.config.set(WORKER_CONFIG):  # the nannies hand it to their workers
+        with dask.config.set(WORKER_CONFIG), _interrupt_held(interrupted):
             _preload_rows()
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                    dashboard_address=":0", silence_logs=logging.ERROR)
@@ -161,6 +182,9 @@ def local_cluster(workers: int) -> Iterator[Client]:
             f"({type(exc).__name__}: {' '.join(str(exc).split())}); a Python script that "
             "runs a fleet must do so under 'if __name__ == \"__main__\":' (its worker "
             "processes import the script)") from exc
+    if interrupted:  # Ctrl-C while it started: now that it has, close it and stop
+        cluster.close()
+        raise KeyboardInterrupt
     try:
         client = Client(cluster, set_as_default=False)
         try:

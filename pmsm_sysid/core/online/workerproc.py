@@ -14,7 +14,9 @@ state). It is started and warmed up (its modules imported) when the worker is cr
 when the first item is due. If the process dies (killed, out of memory), the item fails
 with :class:`WorkerDied`, the processor is rebuilt in a new process (its state starts
 again), and the next item goes there. A worker whose owner is gone (killed with SIGKILL,
-so it could not say so) ends itself within half a second.
+so it could not say so) ends itself within half a second. A worker ignores SIGINT: its
+owner decides when it stops (a terminal's Ctrl-C reaches every process of the foreground
+group, and a worker interrupted mid-item would only print a traceback).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
+import signal
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -74,6 +77,7 @@ def _watch(owner: int, period_s: float = 0.5) -> None:
 
 def _build(factory: Callable[..., Any], args: Sequence[Any], method: str | None,
            owner: int, nice: int) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the owner stops it (module docstring)
     if nice:
         os.nice(nice)
     threading.Thread(target=_watch, args=(owner,), name="owner-watch", daemon=True).start()
@@ -93,18 +97,31 @@ def _ready() -> int:
 
 
 def _context() -> Any:
+    return multiprocessing.get_context(START_METHOD)
+
+
+def start_server(preload: Sequence[str] | None = None) -> None:
+    """Start the fork server now (if it is not running), so that its imports (``preload``;
+    None: :data:`PRELOAD`, about a second of CPU) run beside the caller's own start-up
+    instead of delaying its first worker.
+
+    The server starts with SIGINT blocked, which it and every process forked from it keep:
+    a Ctrl-C on the terminal (sent to the whole foreground process group) then stops only
+    the caller, which closes its workers, instead of interrupting the server's start-up and
+    the workers' with a traceback each. The calling thread blocks SIGINT only while it
+    starts the server: a Ctrl-C meanwhile reaches the caller right after.
+    """
     ctx = multiprocessing.get_context(START_METHOD)
-    ctx.set_forkserver_preload(list(PRELOAD))
-    return ctx
+    ctx.set_forkserver_preload(list(PRELOAD if preload is None else preload))
+    from multiprocessing import forkserver, resource_tracker
 
-
-def start_server() -> None:
-    """Start the fork server now, so that its imports (:data:`PRELOAD`, about a second of
-    CPU) run beside the caller's own start-up instead of delaying its first worker."""
-    _context()
-    from multiprocessing import forkserver
-
-    forkserver.ensure_running()
+    # the server's resource tracker first: starting it unblocks SIGINT in the calling thread
+    resource_tracker.ensure_running()
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})  # inherited by the server
+    try:
+        forkserver.ensure_running()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
 
 def _warm_up(pool: ProcessPoolExecutor) -> None:
@@ -133,6 +150,7 @@ class ProcessWorker(Generic[T, R]):
         self._pool = self._start()
 
     def _start(self) -> ProcessPoolExecutor:
+        start_server()  # returns at once if it runs (else: started deaf to Ctrl-C)
         pool = ProcessPoolExecutor(max_workers=1, mp_context=_context(),
                                    initializer=_build, initargs=self._spec)
         # start and warm up the process now, not at the first item, from a thread: the
