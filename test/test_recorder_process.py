@@ -180,3 +180,17 @@ def test_sim_clock_paces_to_identifier_and_recorder(ros_context: Any, tmp_path: 
     for sig in ("thrust", "speed", "position"):
         ts = stamps[f"{ns}/{sig}"]
         assert len(ts) == 2500 and {b - a for a, b in itertools.pairwise(ts)} == {PERIOD_NS}
+
+
+def test_a_recorder_whose_caller_is_gone_tells_it_nothing() -> None:
+    """A caller interrupted while its recorder starts closes its end of the pipe before the
+    recorder says it is ready: the recorder's message then goes nowhere, without a traceback
+    (the recorder records nothing and closes its bag)."""
+    import multiprocessing
+
+    from pmsm_sysid.nodes.recorder_process import _tell
+
+    mine, callers = multiprocessing.Pipe()
+    assert _tell(mine, ("ready", None)) is True and callers.recv() == ("ready", None)
+    callers.close()
+    assert _tell(mine, ("ready", None)) is False

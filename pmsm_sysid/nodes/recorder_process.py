@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.errors import PmsmSysidError
-from ..core.online.workerproc import START_METHOD
+from ..core.online.workerproc import START_METHOD, start_server
 from ..dds import use_packaged_profile
 from ..topics import INPUT_TYPES, input_topic
 
@@ -47,6 +47,15 @@ def _drain(executor: Any, node: Any, timeout_s: float = 0.1) -> None:
         before = node.total
         executor.spin_once(timeout_sec=timeout_s)
         quiet = quiet + 1 if node.total == before else 0
+
+
+def _tell(conn: Any, message: tuple[str, Any]) -> bool:
+    """Send ``message`` to the caller; False when it is gone (its end of the pipe closed)."""
+    try:
+        conn.send(message)
+    except (BrokenPipeError, ConnectionResetError):
+        return False
+    return True
 
 
 def _serve(conn: Any, path: str, namespace: str, domain_id: int | None,
@@ -71,21 +80,22 @@ def _serve(conn: Any, path: str, namespace: str, domain_id: int | None,
         try:
             bag = BagRecorder(path, flush_interval_s=flush_s)
         except PmsmSysidError as exc:
-            conn.send(("error", str(exc)))
+            _tell(conn, ("error", str(exc)))
             return
         node = RecorderNode(bag, context=ctx, namespace=namespace, topics=topics,
                             flush_period_s=flush_s, node_name=NODE_NAME, inputs=inputs)
         executor = SingleThreadedExecutor(context=ctx)
         executor.add_node(node)
         followed = input_topics(namespace, inputs)
-        conn.send(("ready", None))
-        command = _record(conn, executor, node, followed, progress)
+        # the caller may be gone already (interrupted while this started): record nothing
+        ready = _tell(conn, ("ready", None))
+        command = _record(conn, executor, node, followed, progress) if ready else None
         _drain(executor, node)
         bag.close()
         for i, topic in enumerate(followed):
             progress[i] = node.counts[topic]
         if command is not None:
-            conn.send(("done", node.summary()))
+            _tell(conn, ("done", node.summary()))
         executor.shutdown(timeout_sec=2.0)
         node.destroy_node()  # type: ignore[no-untyped-call]
     finally:
@@ -121,6 +131,7 @@ class RecorderProcess:
                  topics: Sequence[str] | None = None, flush_period_s: float = 0.5,
                  ready_timeout_s: float = 120.0, inputs: Mapping[str, str] | None = None,
                  ) -> None:
+        start_server()  # returns at once if it runs (else: started deaf to Ctrl-C)
         ctx: Any = multiprocessing.get_context(START_METHOD)
         self.path = Path(path)
         self.node_name = NODE_NAME
