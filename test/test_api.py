@@ -157,7 +157,8 @@ def test_bad_options_raise_the_base_error_before_any_work(call: Any, fragment: s
 
 def test_import_is_light_and_offline_verbs_load_no_ros_and_no_plotting(tmp_path: Path) -> None:
     """Each public name loads its own module on first use: identify, gfrf and simulate load
-    neither ROS nor plotting nor what a diagnosis needs."""
+    neither ROS nor plotting nor what a diagnosis needs, and neither does what the live
+    workers' fork server preloads."""
     code = (
         "import sys, pmsm_sysid as ps\n"
         "heavy = ('numpy', 'scipy', 'rclpy', 'matplotlib', 'rosbags')\n"
@@ -170,6 +171,9 @@ def test_import_is_light_and_offline_verbs_load_no_ros_and_no_plotting(tmp_path:
         f"{str(tmp_path / 'sim')!r}]) == 0\n"
         "loaded = [m for m in ('rclpy', 'matplotlib') if m in sys.modules]\n"
         "assert not loaded, loaded\n"
+        # nor what the live workers' fork server preloads
+        "from pmsm_sysid.core.online.workerproc import PRELOAD\n"
+        "for m in PRELOAD: __import__(m)\n"
         # what a diagnosis needs, not an identification (about half a second of CPU)
         "loaded = [m for m in ('scipy.signal', 'scipy.stats', 'scipy.optimize', "
         "'pmsm_sysid.api.diagnosis', 'pmsm_sysid.core.discrepancy') if m in sys.modules]\n"

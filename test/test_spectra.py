@@ -83,8 +83,8 @@ def test_welch_refuses_a_segment_it_cannot_take(nperseg: int) -> None:
 def test_a_live_worker_fits_and_analyses_without_scipy_signal_or_stats() -> None:
     """The identifier's and GFRF node's work in a worker process (forked from the fork
     server with what it preloads): the default motor's windows, fitted until models and
-    cross-validations come and each model analysed; the process never imported
-    scipy.signal or scipy.stats."""
+    cross-validations come and each model analysed; the work never imported scipy.signal
+    or scipy.stats (nor does the server's own preload: test_api's import test)."""
     from worker_probe import FitAndAnalyse
 
     from pmsm_sysid.core.online.livesim import simulated_windows
