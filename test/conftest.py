@@ -116,8 +116,7 @@ def _block_ros() -> None:
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Modules with ``slow`` tests first, each module's tests kept together (module fixtures
     are made once) and in order, so that the test processes get the long tests early
-    and finish together, and modules of ROS tests alternating with the others
-    (:func:`_module_rank`); with ``--without-ros``, the ``ros`` tests are deselected. Under
+    and finish together; with ``--without-ros``, the ``ros`` tests are deselected. Under
     ``--dist loadgroup`` a test of an ``xdist_group`` that did not get its group (a pytest
     that pytest-xdist cannot group with) fails: the group's shared runs would be made once
     in each test process."""
@@ -130,28 +129,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if ros:
             config.hook.pytest_deselected(items=ros)
             items[:] = [item for item in items if not item.get_closest_marker("ros")]
-    items.sort(key=_module_rank(items).__getitem__)  # stable: each module's order kept
-
-
-def _module_rank(items: list[pytest.Item]) -> dict[pytest.Item, int]:
-    """Each test's place by its module: the modules with ``slow`` tests first, and among
-    them (and among the others) the modules with ``ros`` tests alternating with those
-    without, in collection order: the ROS tests spend much of their time waiting on real
-    time (discovery, replays, signals), so the test processes running them side by side
-    would leave the cores idle while the others compute."""
-    modules: dict[Path, tuple[bool, bool]] = {}
-    for item in items:
-        slow, ros = modules.get(item.path, (False, False))
-        modules[item.path] = (slow or item.get_closest_marker("slow") is not None,
-                              ros or item.get_closest_marker("ros") is not None)
-    order: list[Path] = []
-    for slow in (True, False):
-        waiting = [m for m, (s, r) in modules.items() if s == slow and r]
-        computing = [m for m, (s, r) in modules.items() if s == slow and not r]
-        for k in range(max(len(waiting), len(computing))):
-            order.extend(group[k] for group in (computing, waiting) if k < len(group))
-    place = {m: i for i, m in enumerate(order)}
-    return {item: place[item.path] for item in items}
+    slow_modules = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in slow_modules)  # stable: order otherwise kept
 
 
 @pytest.hookimpl(tryfirst=True)
