@@ -483,7 +483,15 @@ def modules():
     return os.getppid(), sorted(m for m in sys.modules
                                 if m.split(".")[0] in ("pmsm_sysid", "numpy", "scipy"))
 
+def defaults():
+    import dask.distributed  # loads Dask distributed's settings
+    return [dask.config.get(key) for key in (
+        "distributed.worker.profile.enabled",
+        "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_",
+        "distributed.worker.multiprocessing-method")]
+
 real, sim, plant = sys.argv[1:4]
+dask_before = defaults()
 with local_cluster(1) as client:
     (got,) = client.run(settings).values()
     (parent, before), = client.run(modules).values()
@@ -491,7 +499,8 @@ with local_cluster(1) as client:
                           client.submit(recording_row, real, sim=sim)])
     (_, after), = client.run(modules).values()
 print(json.dumps({"settings": got, "parent": parent, "me": os.getpid(), "before": before,
-                  "after": after, "rows": [[r["status"], r["error"]] for r in rows]}))
+                  "after": after, "rows": [[r["status"], r["error"]] for r in rows],
+                  "dask": [dask_before, defaults()]}))
 """
 
 
@@ -503,21 +512,8 @@ def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_thresh
     one BLAS thread. They are forked from a fork server (not children of the caller) that
     imported what a row needs: a row against a plant or a simulator's recording then
     imports no numerical module of its own. Dask's own settings are left as they were."""
-    import dask
-    import dask.distributed  # loads Dask distributed's settings
-
     from pmsm_sysid.api.fleet_row import ROW_MODULES
-    from pmsm_sysid.batch.cluster import local_cluster
 
-    def defaults() -> tuple[object, object, object]:
-        return (dask.config.get("distributed.worker.profile.enabled"),
-                dask.config.get("distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"),
-                dask.config.get("distributed.worker.multiprocessing-method"))
-
-    assert defaults() == (True, 65536, "spawn")  # Dask's defaults
-    with local_cluster(1):
-        pass
-    assert defaults() == (True, 65536, "spawn")  # left as they were
     real, sim = (recording(tmp_path / name, drive(), seed=seed, day=0)
                  for name, seed in (("real", 11), ("sim", 12)))
     proc = subprocess.run([sys.executable, "-c", CLUSTER_SCRIPT, str(real), str(sim),
@@ -530,6 +526,7 @@ def test_the_local_clusters_workers_run_without_the_profiler_and_the_trim_thresh
     assert set(ROW_MODULES) <= set(got["before"])
     assert got["rows"] == [["ok", None], ["ok", None]]
     assert sorted(set(got["after"]) - set(got["before"])) == []
+    assert got["dask"] == [[True, 65536, "spawn"]] * 2  # Dask's defaults, as they were
 
 
 @pytest.mark.slow
