@@ -75,18 +75,25 @@ def _passes(sos: FloatArray, rows: FloatArray, ext: FloatArray, back: FloatArray
             ) -> FloatArray:
     """The filtered ``rows`` (signals, samples): a reversed view into ``back``. ``ext`` and
     ``back`` are row-major buffers of the padded shape, as SciPy's copies are."""
-    n_sections, p = sos.shape[0], _padlen(sos)
     sos_c = np.ascontiguousarray(sos)
-    zi = _zi(sos_c.tobytes(), n_sections)
-    n = rows.shape[1]
-    ext[:, :p] = 2 * rows[:, :1] - rows[:, p:0:-1]
+    n, p = rows.shape[1], _padlen(sos)
     ext[:, p:p + n] = rows
-    ext[:, p + n:] = 2 * rows[:, -1:] - rows[:, -2:-(p + 2):-1]
-    _sosfilt(sos_c, ext, np.ascontiguousarray(zi[None] * ext[:, 0, None, None]))
-    np.copyto(back, ext[:, ::-1])
-    _sosfilt(sos_c, back, np.ascontiguousarray(zi[None] * ext[:, -1, None, None]))
-    y: FloatArray = back[:, ::-1][:, p:p + n]
+    y: FloatArray = _filter_padded(sos_c, _zi(sos_c.tobytes(), sos.shape[0]), ext, back, p, n)
     return y
+
+
+def _filter_padded(sos: Any, zi: FloatArray, ext: Any, back: Any, p: int, n: int) -> Any:
+    """SciPy's sosfiltfilt of the ``n`` samples each row of ``ext`` holds after ``p`` free
+    ones: odd extension by ``p`` at both ends, the forward pass in ``ext``, the backward
+    pass in ``back`` (both row-major, real or complex); the filtered rows, a reversed view
+    into ``back``."""
+    mid = ext[:, p:p + n]
+    ext[:, :p] = 2 * mid[:, :1] - mid[:, p:0:-1]
+    ext[:, p + n:] = 2 * mid[:, -1:] - mid[:, -2:-(p + 2):-1]
+    _sosfilt(sos, ext, np.ascontiguousarray(zi[None] * ext[:, 0, None, None]))
+    np.copyto(back, ext[:, ::-1])
+    _sosfilt(sos, back, np.ascontiguousarray(zi[None] * ext[:, -1, None, None]))
+    return back[:, ::-1][:, p:p + n]
 
 
 #: Largest buffer (values) :func:`thinned_columns` keeps per thread between calls.
@@ -137,15 +144,9 @@ def _paired(sos: FloatArray, rows: FloatArray, edge: int, step: int) -> FloatArr
     ext, back = (b.view(np.complex128) for b in _buffers((half, 2 * (n + 2 * p))))
     ext.real[:, p:p + n] = rows[0::2]
     ext.imag[:, p:p + n] = rows[1::2]
-    mid = ext[:, p:p + n]
-    ext[:, :p] = 2 * mid[:, :1] - mid[:, p:0:-1]
-    ext[:, p + n:] = 2 * mid[:, -1:] - mid[:, -2:-(p + 2):-1]
-    sos_c = np.ascontiguousarray(sos, dtype=np.complex128)
     zi = _zi(np.ascontiguousarray(sos).tobytes(), sos.shape[0])
-    _sosfilt(sos_c, ext, np.ascontiguousarray(zi[None] * ext[:, 0, None, None]))
-    np.copyto(back, ext[:, ::-1])
-    _sosfilt(sos_c, back, np.ascontiguousarray(zi[None] * ext[:, -1, None, None]))
-    y = back[:, ::-1][:, p:p + n][:, edge:n - edge:step]
+    y = _filter_padded(np.ascontiguousarray(sos, dtype=np.complex128), zi, ext, back, p,
+                       n)[:, edge:n - edge:step]
     out: FloatArray = np.empty((y.shape[1], 2 * half))
     out[:, 0::2] = y.real.T
     out[:, 1::2] = y.imag.T
