@@ -152,9 +152,7 @@ def _analyse(client: Client | None, scheduler_client: Client | None, workers: in
     if client is None and scheduler_client is None and len(todo) == 1:
         # one recording axis to analyse: in this process; a local cluster would cost more
         # to start (a worker's imports alone: about 1.5 s of CPU) than the row (about 0.5 s)
-        u = todo[0]
-        on_row(recording_row(u.path, namespace=u.namespace, joint=u.joint, axis=u.axis,
-                             content_sha256=u.content, **batch.row_options))
+        on_row(recording_row(todo[0].path, **todo[0].row_arguments(), **batch.row_options))
         return int(state["failed"])
     with ExitStack() as stack:
         # no more local workers than recordings to analyse: a worker started for nothing

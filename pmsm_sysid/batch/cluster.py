@@ -198,16 +198,15 @@ def local_cluster(workers: int) -> Iterator[Client]:
 def run(client: Client, units: Sequence[Unit], task: Callable[..., dict[str, Any]],
         options: Mapping[str, Any], on_row: Callable[[dict[str, Any]], None],
         on_failure: Callable[[Unit, BaseException], dict[str, Any]]) -> None:
-    """Submit ``task(unit.path, namespace=, joint=, axis=, content_sha256=, **options)`` for
-    every unit and hand each row to ``on_row`` as it finishes (any order). A task that
-    raises (its worker died) gives ``on_failure(unit, exc)``'s row. On any exit (Ctrl-C
-    too) the tasks not finished are cancelled."""
+    """Submit ``task(unit.path, **unit.row_arguments(), **options)`` for every unit and
+    hand each row to ``on_row`` as it finishes (any order). A task that raises (its worker
+    died) gives ``on_failure(unit, exc)``'s row. On any exit (Ctrl-C too) the tasks not
+    finished are cancelled."""
     from dask.distributed import as_completed
 
     pending: dict[Any, Unit] = {}
     for u in units:
-        fut = client.submit(task, u.path, namespace=u.namespace, joint=u.joint, axis=u.axis,
-                            content_sha256=u.content, pure=False, **options)
+        fut = client.submit(task, u.path, pure=False, **u.row_arguments(), **options)
         pending[fut] = u
     try:
         for fut in as_completed(list(pending), loop=client.loop):

@@ -16,6 +16,7 @@ import os
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from ..core.errors import OptionError, PmsmSysidError
 
@@ -36,6 +37,12 @@ class Unit:
     joint: str | None
     axis: str | None
     content: str
+
+    def row_arguments(self) -> dict[str, Any]:
+        """The keyword arguments of :func:`pmsm_sysid.api.fleet_row.recording_row` that
+        say which axis of which recording this row is."""
+        return {"namespace": self.namespace, "joint": self.joint, "axis": self.axis,
+                "content_sha256": self.content}
 
     @property
     def key(self) -> str:
