@@ -207,21 +207,22 @@ class MotorSimulator:
         u = float(thrust)
         if not math.isfinite(u):
             raise DataError(f"thrust at sample {self._k} is not finite ({thrust})")
+        self._x, self._v, self._f = self._step(self._x, self._v, self._f, u)
+        self._k += 1
+        self._z = self._draw_measurement()
+
+    def _step(self, x: float, v: float, f: float, u: float) -> tuple[float, float, float]:
+        """The state (x, v, F) one sample period on from (``x``, ``v``, ``f``): ``u`` joins
+        the command history, whose delayed values are held over the period with this
+        sample's process force."""
         history = self._history
         history.append(u)
         w = self._w_std * self._force_noise.draw()
-        m, r = self._delay_m, self._delay_r
-        x, v, f, run = self._x, self._v, self._f, self._rk4.run
+        m, r, run = self._delay_m, self._delay_r, self._rk4.run
         if r == 0.0:
-            x, v, f = run(x, v, f, self._period, history[-1 - m] if m < len(history) else 0.0,
-                          w)
-        else:
-            x, v, f = run(x, v, f, r, history[-2 - m] if m + 1 < len(history) else 0.0, w)
-            x, v, f = run(x, v, f, self._period - r,
-                          history[-1 - m] if m < len(history) else 0.0, w)
-        self._x, self._v, self._f = x, v, f
-        self._k += 1
-        self._z = self._draw_measurement()
+            return run(x, v, f, self._period, history[-1 - m] if m < len(history) else 0.0, w)
+        x, v, f = run(x, v, f, r, history[-2 - m] if m + 1 < len(history) else 0.0, w)
+        return run(x, v, f, self._period - r, history[-1 - m] if m < len(history) else 0.0, w)
 
     def replay(self, thrust: list[float], restart: list[int], position: list[float],
                speed: list[float]) -> tuple[list[float], list[float]]:
@@ -235,8 +236,7 @@ class MotorSimulator:
         recording 0.18 s -> 0.14 s of CPU)."""
         if self._plant.noise is not None:
             raise PlantError("replay needs a plant without a noise block")
-        history, draw, run = self._history, self._force_noise.draw, self._rk4.run
-        m, r, period, w_std = self._delay_m, self._delay_r, self._period, self._w_std
+        step = self._step
         x, v, f = self._x, self._v, self._f
         restarts, out_v, out_x = set(restart), [], []
         isfinite = math.isfinite
@@ -250,14 +250,7 @@ class MotorSimulator:
                 break
             if not isfinite(u):
                 raise DataError(f"thrust at sample {self._k + k} is not finite ({u})")
-            history.append(u)
-            w = w_std * draw()
-            if r == 0.0:
-                x, v, f = run(x, v, f, period, history[-1 - m] if m < len(history) else 0.0, w)
-            else:
-                x, v, f = run(x, v, f, r, history[-2 - m] if m + 1 < len(history) else 0.0, w)
-                x, v, f = run(x, v, f, period - r,
-                              history[-1 - m] if m < len(history) else 0.0, w)
+            x, v, f = step(x, v, f, u)
         self._x, self._v, self._f = x, v, f
         self._k += len(out_v) if isfinite(v) else len(out_v) - 1
         return out_v, out_x
