@@ -66,6 +66,17 @@ use_packaged_profile()
 
 
 UNGROUPED = pytest.StashKey[bool]()
+#: Multiprocessing starts one fork server per process, and all its users share it: in a
+#: test process, the live pipeline's fit and GFRF workers, the diagnosis worker, the
+#: recorder process and a fleet's local workers (Dask's ``forkserver`` method). Whoever
+#: started it first chose what it imports (a fleet's cluster: Dask's list), and every
+#: process forked for the others imported the rest itself, about a second of CPU each. So
+#: each test process starts it before its first test, preloading what they all need: the
+#: live workers' :data:`~pmsm_sysid.core.online.workerproc.PRELOAD`, these, and a fleet
+#: row's :data:`~pmsm_sysid.api.fleet_row.ROW_MODULES` (an import that fails, e.g. rclpy
+#: under ``--without-ros``, is skipped by the server).
+FORK_SERVER_USERS = ("pmsm_sysid.core.frequency.message", "pmsm_sysid.nodes.diagnosis_work",
+                     "pmsm_sysid.nodes.recorder_process")
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -138,9 +149,23 @@ def pytest_runtestloop(session: pytest.Session) -> None:
     """Before the first test of a test process: what collection made (the modules, every
     test item: most of the process's objects) out of the cyclic garbage collector's sight
     (``gc.freeze``), so that its full collections walk only what the tests made. Measured
-    on the suite: the three test processes' time in the collector 10.3 -> 5.5 s of CPU."""
+    on the suite: the three test processes' time in the collector 10.3 -> 5.5 s of CPU.
+    Then the process's fork server is started (:data:`FORK_SERVER_USERS`)."""
     gc.collect()
     gc.freeze()
+    config = session.config
+    runs_tests = hasattr(config, "workerinput") or not config.getoption("numprocesses", None)
+    if runs_tests and not config.option.collectonly:  # not pytest-xdist's controller
+        _start_fork_server()
+
+
+def _start_fork_server() -> None:
+    """Start this test process's fork server, preloading what its users need
+    (:data:`FORK_SERVER_USERS`)."""
+    from pmsm_sysid.api.fleet_row import ROW_MODULES
+    from pmsm_sysid.core.online.workerproc import PRELOAD, start_server
+
+    start_server([*PRELOAD, *FORK_SERVER_USERS, "distributed", *ROW_MODULES])
 
 
 def _cpu_now() -> float:
