@@ -11,7 +11,7 @@ true plant file replays no worse than the nominal one, with diagnose's split and
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +23,7 @@ from pmsm_sysid.core.discrepancy.resim import (
     HORIZON_S,
     PERIODIC_LEFT,
     Horizon,
+    ReplayComparison,
     allowed_drift,
     choose_horizon,
     compare,
@@ -31,8 +32,11 @@ from pmsm_sysid.core.discrepancy.resim import (
     replay,
 )
 from pmsm_sysid.core.discrepancy.showfit import replay_notes
-from pmsm_sysid.core.physics.plant import Cogging, ForceOffset, Harmonic, load_plant
+from pmsm_sysid.core.physics.plant import Cogging, ForceOffset, Harmonic, Plant, load_plant
 from pmsm_sysid.core.recording.signals import Recording
+
+#: one test process for the file: its tests share the cogging bag's horizon and replay
+pytestmark = pytest.mark.xdist_group("discrepancy_replay")
 
 REPO = Path(__file__).resolve().parents[1]
 NOMINAL = load_plant(REPO / "plants" / "nominal.yaml")
@@ -50,6 +54,29 @@ def _rec(bag: str) -> Recording:
 def _split(rec: Recording) -> tuple[Recording, Recording]:
     cut = int(0.7 * len(rec))  # diagnose's default held-out split
     return rec.window(0, cut), rec.window(cut, len(rec))
+
+
+@dataclass(frozen=True)
+class CoggingBag:
+    """paper_speed_cogging with the plant it was made from, the horizon chosen for the
+    nominal and the true plant on it, and the true plant's replay against the nominal one
+    at that horizon."""
+
+    rec: Recording
+    true: Plant
+    hz: Horizon
+    better: ReplayComparison
+
+
+@pytest.fixture(scope="module")
+def cogging_bag() -> CoggingBag:
+    """Made once: three tests read the same bag, and two of them choose the same horizon
+    and replay the same pair of plants on it (the horizon's drift scan and the replays are
+    most of their time); they only read what this holds."""
+    rec = _rec("paper_speed_cogging")
+    true = load_plant(REPO / "plants" / "cogging.yaml")
+    hz = choose_horizon((NOMINAL, true), rec)
+    return CoggingBag(rec, true, hz, compare(NOMINAL, true, rec, hz))
 
 
 def test_allowed_drift_closed_form() -> None:
@@ -88,21 +115,21 @@ def test_periodic_components_of_a_plant() -> None:
     assert periodic_components(NOMINAL, 30.0) == []
 
 
-def test_a_quarter_second_horizon_penalises_the_true_cogging_plant() -> None:
+def test_a_quarter_second_horizon_penalises_the_true_cogging_plant(
+        cogging_bag: CoggingBag) -> None:
     """The cause: on paper_speed_cogging (5 N thrust noise) the replay drifts by about half
     the 5 mm pitch in 0.25 s, and the TRUE plant replays worse than the nominal one there;
     at the chosen horizon the drift is within the allowance and the true plant is better."""
-    rec = _rec("paper_speed_cogging")
-    true = load_plant(REPO / "plants" / "cogging.yaml")
+    rec, true = cogging_bag.rec, cogging_bag.true
     fixed = replay(true, rec, HORIZON_S)
     assert fixed.nrmse > replay(NOMINAL, rec, HORIZON_S).nrmse
     drift = drift_profile(fixed, rec)
     assert drift[-1] > 0.3 * 0.005
-    hz = choose_horizon((NOMINAL, true), rec)
+    hz = cogging_bag.hz
     assert hz.resolved and hz.allowed_m is not None and hz.drift_m is not None
     assert hz.drift_m <= hz.allowed_m and hz.samples < len(drift)
     assert drift[hz.samples - 1] <= hz.allowed_m < drift[hz.samples]
-    c = compare(NOMINAL, true, rec, hz)
+    c = cogging_bag.better
     assert c.after.nrmse < c.before.nrmse and c.verdict == "better"
 
 
@@ -124,15 +151,13 @@ def test_true_plant_replays_no_worse_than_nominal(bag: str, plant: str) -> None:
             assert c.verdict != "worse"
 
 
-def test_verdicts_worse_and_unresolved_are_said() -> None:
+def test_verdicts_worse_and_unresolved_are_said(cogging_bag: CoggingBag) -> None:
     """A cogging model in anti-phase replays worse; a 0.01 N offset is below what the
     replay can see: both verdicts are reached, and the notes say so."""
-    rec = _rec("paper_speed_cogging")
-    true = load_plant(REPO / "plants" / "cogging.yaml")
+    rec, true, hz = cogging_bag.rec, cogging_bag.true, cogging_bag.hz
     assert true.cogging is not None
     wrong = replace(true, cogging=Cogging(3.0, 0.005, 0.5 + math.pi,
                                           (Harmonic(2, 1.0, math.pi),)))
-    hz = choose_horizon((NOMINAL, true), rec)
     worse = compare(NOMINAL, wrong, rec, hz)
     assert worse.verdict == "worse" and worse.after.nrmse > worse.before.nrmse
     tiny = compare(NOMINAL, replace(NOMINAL, force_offset=ForceOffset(0.01)), rec)
@@ -143,13 +168,13 @@ def test_verdicts_worse_and_unresolved_are_said() -> None:
     assert len(notes) == 2
     assert "estimation" in notes[0] and "replays worse" in notes[0]
     assert "validation" in notes[1] and "cannot see cogging" in notes[1]
-    better = {"estimation": {"output_error": compare(NOMINAL, true, rec, hz).to_dict()}}
+    better = {"estimation": {"output_error": cogging_bag.better.to_dict()}}
     assert replay_notes(better, ["cogging"]) == []
 
 
-def test_drift_beyond_the_floor_is_flagged() -> None:
+def test_drift_beyond_the_floor_is_flagged(cogging_bag: CoggingBag) -> None:
     """A 0.1 mm pitch cannot be followed even over the shortest horizon: not resolved."""
-    rec = _rec("paper_speed_cogging")
+    rec = cogging_bag.rec
     fine = replace(NOMINAL, cogging=Cogging(1.0, 0.0001))
     hz = choose_horizon((NOMINAL, fine), rec)
     assert not hz.resolved and hz.samples == 5
