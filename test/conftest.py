@@ -209,6 +209,38 @@ def shared_dir() -> Path:
 
 
 @dataclass(frozen=True)
+class EmpsDiagnosis:
+    """The EMPS recording as ``import-mat`` writes it, and ``diagnose`` of the whole of it
+    against plants/emps.yaml (``--json``, ``--report``): each command's result as
+    :func:`cli_inprocess.invoke` gives it (exit status, stdout, stderr)."""
+
+    imported: subprocess.CompletedProcess[str]
+    bag: Path
+    diagnosed: subprocess.CompletedProcess[str]
+    json: Path
+    report: Path
+
+
+@pytest.fixture(scope="session")
+def emps_diagnosis(tmp_path_factory: pytest.TempPathFactory) -> EmpsDiagnosis:
+    """The EMPS import and its diagnosis, made once for the tests that read them (the real
+    recording's numbers, and the walkthrough that replays a slice of it): the same command
+    on the same bag gives the same JSON (its timings apart), and it costs about 1.5 s of
+    CPU, plus a Python and its imports where it ran as a process. The tests that use it
+    share ``xdist_group("emps")``, so that under ``--dist loadgroup`` it is made in one test
+    process only. The bag and the files are only read."""
+    from cli_inprocess import invoke
+
+    assert EMPS_MAT.is_file(), f"{EMPS_MAT} missing"
+    tmp = tmp_path_factory.mktemp("emps")
+    bag, out, rep = tmp / "emps", tmp / "emps.json", tmp / "rep"
+    imported = invoke("import-mat", str(EMPS_MAT), "--out", str(bag))
+    diagnosed = invoke("diagnose", "--plant", str(REPO / "plants" / "emps.yaml"), "--real",
+                       str(bag), "--json", str(out), "--report", str(rep))
+    return EmpsDiagnosis(imported, bag, diagnosed, out, rep)
+
+
+@dataclass(frozen=True)
 class Chromium:
     """A headless Chromium binary and how to start it here (as root, offline)."""
 

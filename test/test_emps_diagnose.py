@@ -12,28 +12,27 @@ import json
 from pathlib import Path
 
 import pytest
-from conftest import EMPS_MAT
+from conftest import EMPS_MAT, EmpsDiagnosis
 
 from pmsm_sysid.cli import main
 
-REPO = Path(__file__).resolve().parents[1]
 FC_REF, OFFSET_REF = 20.3935, -3.1648
 
 
 @pytest.mark.slow
-def test_emps_names_coulomb_friction_and_offset(shared_dir: Path, tmp_path: Path,
+@pytest.mark.xdist_group("emps")  # the import and its diagnosis: made once (conftest)
+def test_emps_names_coulomb_friction_and_offset(shared_dir: Path,
+                                                emps_diagnosis: EmpsDiagnosis,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     assert EMPS_MAT.is_file(), f"{EMPS_MAT} missing"
-    bag = tmp_path / "emps"
-    assert main(["import-mat", str(EMPS_MAT), "--out", str(bag)]) == 0
+    bag = emps_diagnosis.bag
+    assert emps_diagnosis.imported.returncode == 0, emps_diagnosis.imported.stderr
     # identify reads only as far as its windows need: that is not a truncated bag
     assert main(["identify", str(bag), "--terms", "4", "--ny", "2", "--nu", "2"]) == 0
     assert "warning: reading the bag" not in capsys.readouterr().out
-    out = tmp_path / "emps.json"
-    rep = tmp_path / "rep"
-    assert main(["diagnose", "--plant", str(REPO / "plants" / "emps.yaml"), "--real",
-                 str(bag), "--json", str(out), "--report", str(rep)]) == 0
-    summary = capsys.readouterr().out
+    out, rep = emps_diagnosis.json, emps_diagnosis.report
+    assert emps_diagnosis.diagnosed.returncode == 0, emps_diagnosis.diagnosed.stderr
+    summary = emps_diagnosis.diagnosed.stdout
     d = json.loads(out.read_text())
     named = {e["name"]: e for e in d["effects"] if e["name"] != "unexplained"}
     coulomb, offset = named["coulomb_friction"], named["force_offset"]

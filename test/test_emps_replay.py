@@ -6,31 +6,30 @@ recording has no speed topic, so the identifier derives speed from position live
 same causal differentiator the offline readers use; every window it fits (speed and
 position) must be the model ``identify`` finds offline on the same samples: the same terms,
 estimates equal to 1e-9. A slice of the recording keeps the replay short (4 s of its own
-pace, at half speed); ``diagnose`` reads the whole recording, in its own process while the
-replay keeps its pace; ``identify`` runs in this process.
+pace, at half speed); ``identify`` runs in this process. The import and ``diagnose`` of the
+whole recording are those test_emps_diagnose.py checks, made once for both (conftest's
+``emps_diagnosis``, the two files in one xdist group).
 """
 
 from __future__ import annotations
 
 import json
 import os
-import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from conftest import EMPS_MAT
+from conftest import EMPS_MAT, EmpsDiagnosis
 from replay_helpers import (
     assert_identify_verb_agrees,
     assert_live_equals_offline,
     replay_into_pipeline,
 )
 
-from pmsm_sysid.cli import main
-
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+# the import and its diagnosis: made once for this file and test_emps_diagnose.py (conftest)
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.xdist_group("emps")]
 REPO = Path(__file__).resolve().parents[1]
 START, STOP = 10_000, 14_000  # the slice replayed (samples of the 24841)
 
@@ -43,39 +42,24 @@ def _slice(full: Path, out: Path) -> None:
 
 
 def test_emps_walkthrough_live_equals_offline(ros_context: Any, ros_env: int,
+                                              emps_diagnosis: EmpsDiagnosis,
                                               tmp_path: Path) -> None:
     from pmsm_sysid.bagio import read_recording
 
     assert EMPS_MAT.is_file(), f"{EMPS_MAT} missing"
-    full, part = tmp_path / "emps", tmp_path / "emps_slice"
-    assert main(["import-mat", str(EMPS_MAT), "--out", str(full)]) == 0
+    full, part = emps_diagnosis.bag, tmp_path / "emps_slice"
+    assert emps_diagnosis.imported.returncode == 0, emps_diagnosis.imported.stderr
     _slice(full, part)
     env = {**os.environ, "ROS_DOMAIN_ID": str(ros_env), "ROS_LOG_DIR": str(tmp_path / "log"),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     live = tmp_path / "live"
-    # diagnose reads the whole recording and nothing of the live run: it runs (its own
-    # process) while the replay keeps its pace; its result is checked at the end
-    diag, diag_err = tmp_path / "diag.json", tmp_path / "diagnose.stderr"
-    with diag_err.open("w") as err:
-        diagnosing = subprocess.Popen(
-            [sys.executable, "-m", "pmsm_sysid.cli", "diagnose", "--plant",
-             str(REPO / "plants" / "emps.yaml"), "--real", str(full), "--json", str(diag)],
-            env=env, stdout=subprocess.DEVNULL, stderr=err)
-    try:
-        # half its own pace: a subscriber starved for up to 2 s (a busy machine) still loses
-        # nothing from its queue of 1000 messages
-        run = replay_into_pipeline(part, env, ros_context, STOP - START, record=str(live),
-                                   replay_args=("--wait", "60", "--subscribers", "2",
-                                                "--rate", "0.5", "--json", "-"),
-                                   identifier_params={"queue_size": 64},
-                                   gfrf_params={"orders": [1], "queue_size": 64})
-    finally:
-        try:
-            diagnosing.wait(timeout=300)
-        finally:
-            if diagnosing.poll() is None:
-                diagnosing.kill()
-                diagnosing.wait()
+    # half its own pace: a subscriber starved for up to 2 s (a busy machine) still loses
+    # nothing from its queue of 1000 messages
+    run = replay_into_pipeline(part, env, ros_context, STOP - START, record=str(live),
+                               replay_args=("--wait", "60", "--subscribers", "2",
+                                            "--rate", "0.5", "--json", "-"),
+                               identifier_params={"queue_size": 64},
+                               gfrf_params={"orders": [1], "queue_size": 64})
     s, models, replayed = run.summary, run.models, json.loads(run.replay_out)
 
     # the replay says what it published and that the identifier listened
@@ -117,7 +101,7 @@ def test_emps_walkthrough_live_equals_offline(ros_context: Any, ros_env: int,
     a = int(np.searchsorted(rec.t, last["window"]["start_stamp"] - 1e-7))
     cli = assert_identify_verb_agrees(part, last, a, env, tmp_path / "identify.json")
     assert cli["speed_derived"] is True
-    assert diagnosing.returncode == 0, diag_err.read_text()
-    named = {e["name"]: e for e in json.loads(diag.read_text())["effects"]}
+    assert emps_diagnosis.diagnosed.returncode == 0, emps_diagnosis.diagnosed.stderr
+    named = {e["name"]: e for e in json.loads(emps_diagnosis.json.read_text())["effects"]}
     assert named["coulomb_friction"]["params"]["amplitude_n"] == pytest.approx(20.39, rel=0.05)
     assert named["force_offset"]["params"]["amplitude_n"] == pytest.approx(-3.16, rel=0.10)
