@@ -86,7 +86,11 @@ def test_two_processes_give_the_one_process_models(ros_context: Any, ros_env: in
     env = {**os.environ, "ROS_DOMAIN_ID": str(ros_env), "ROS_LOG_DIR": str(tmp_path / "log"),
            "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
     bag, summary = tmp_path / "ident", tmp_path / "ident.json"
+    # every window is compared below, so none may be skipped: a queue of 8 windows (4 s at
+    # this pace) holds them while the identifier's fit worker starts, or its thread waits
+    # for a core, on a busy machine (the default of 1 keeps only the newest)
     ident = subprocess.Popen([*CLI, "--nodes", "identifier,gfrf", "--outputs", "speed",
+                              "--set", "identifier.queue_size=8",
                               "--record", str(bag), "--json", str(summary)],
                              env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
