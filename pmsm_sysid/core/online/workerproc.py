@@ -111,7 +111,7 @@ def start_server(preload: Sequence[str] | None = None) -> None:
     the workers' with a traceback each. The calling thread blocks SIGINT only while it
     starts the server: a Ctrl-C meanwhile reaches the caller right after.
     """
-    ctx = multiprocessing.get_context(START_METHOD)
+    ctx = _context()
     ctx.set_forkserver_preload(list(PRELOAD if preload is None else preload))
     from multiprocessing import forkserver, resource_tracker
 
